@@ -1,0 +1,280 @@
+"""`ShelfSort-v0`: sort N objects of 3 classes into their target regions in a cabinet.
+
+Observation ``Box(0, 255, (4, H, W), uint8)``: the recoloured top-down heightmap of §IV-A
+(R, G, B, height over the cabinet height). Rows run from the back of the cabinet (row 0) to the
+front, columns from the camera's left (col 0) to its right. With the default 5 mm cells,
+H x W = 80 x 120: 5 mm is the finest size at which the 640 x 480 camera still samples every
+cell of an empty cabinet, and it keeps the smallest objects (4 cm) 8 cells wide; coarser maps
+lose object edges and finer ones cost the FCN quadratically more on CPU.
+
+Action ``Discrete(n_maps * H * W)``: ``a = m * H * W + row * W + col``. Maps, in order:
+
+- ``primitives=("pick", "push")`` (P+S, default): 0 pick-and-place, 1 push-left, 2 push-right;
+- ``primitives=("pick",)`` (S): 0 pick-and-place.
+
+Push-left moves the blade towards the camera's left (+y, decreasing col), push-right towards
+its right. The cell centre is the push's start or the pick point; targets are kept 2 cm short of
+the back wall and 8 mm from the side walls, where the blade's tip and thickness would hit them.
+
+Reward (Eq. 2): -10 if the step leaves the scene invalid (an object outside the cabinet, or not
+at rest 1 s after the motion), 0 if it reaches the sorted state, -1 otherwise. ``terminated`` on
+sorted or invalid, ``truncated`` after ``max_actions`` actions. See `shelf_env.world` for the
+exact definitions of inside, at rest and in-region.
+
+Hindsight protocol (§IV-D.3, read by `sb3_pixeldqn.HindsightRelabelReplayBuffer`): when a step
+ends valid with every object inside some target region but not all in their own,
+``info["relabelled"]`` holds ``{"obs", "next_obs", "reward", "terminated"}``: both observations
+recoloured with every object's class replaced by the class of the region it is in, reward 0,
+terminated True. The action is unchanged.
+"""
+
+from __future__ import annotations
+
+from numbers import Integral
+
+import gymnasium as gym
+import numpy as np
+import pybullet as pb
+
+from shelf_env import params
+from shelf_env.camera import CLASS_RGB, CameraConfig, HeightmapCamera, recolour, region_masks
+from shelf_env.objects import OBJECT_SETS, sample_specs
+from shelf_env.placement import place_position
+from shelf_env.robot import Primitives, Robot
+from shelf_env.world import World, sample_regions
+
+PRIMITIVES = ("pick", "push")
+ACTION_X_MAX = params.CABINET_DEPTH - 0.02
+ACTION_Y_MAX = params.CABINET_WIDTH / 2 - 0.008
+SPAWN_TRIES = 100
+
+
+def map_names(primitives: tuple[str, ...]) -> list[str]:
+    """Q-map layout for a primitive set: "push" contributes push_left then push_right."""
+    names: list[str] = []
+    for p in primitives:
+        names += ["push_left", "push_right"] if p == "push" else [p]
+    return names
+
+
+class ShelfSortEnv(gym.Env):
+    """Gymnasium env of the confined-shelf sorting task (see module docstring)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
+
+    def __init__(
+        self,
+        num_objects: int = 3,
+        object_set: str = "train",
+        primitives: tuple[str, ...] = ("pick", "push"),
+        max_actions: int = params.MAX_ACTIONS,
+        render_mode: str | None = None,
+        pixel_size: float = params.PIXEL_SIZE,
+        camera: CameraConfig | None = None,
+        max_objects: int = params.MAX_OBJECTS,
+    ) -> None:
+        if object_set not in OBJECT_SETS:
+            raise ValueError(f"unknown object_set {object_set!r}; expected one of {OBJECT_SETS}")
+        primitives = tuple(primitives)
+        unknown = [p for p in primitives if p not in PRIMITIVES]
+        if unknown or not primitives or len(set(primitives)) != len(primitives):
+            raise ValueError(f"primitives must be distinct names from {PRIMITIVES}, got {primitives!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"unknown render_mode {render_mode!r}; expected one of {self.metadata['render_modes']}")
+        if not isinstance(max_actions, Integral) or max_actions < 1:
+            raise ValueError(f"max_actions must be a positive integer, got {max_actions!r}")
+        if not 1 <= max_objects <= params.MAX_OBJECTS:
+            raise ValueError(f"max_objects must be in [1, {params.MAX_OBJECTS}], got {max_objects}")
+        if not 0.002 <= pixel_size <= 0.02:
+            raise ValueError(f"pixel_size must be in [0.002, 0.02] m, got {pixel_size}")
+        self.max_objects = int(max_objects)
+        self.num_objects = self._check_num_objects(num_objects)
+        self.object_set = object_set
+        self.primitives = primitives
+        self.map_names = map_names(primitives)
+        self.max_actions = int(max_actions)
+        self.render_mode = render_mode
+
+        self.client = pb.connect(pb.DIRECT)
+        self.world = World(self.client)
+        self.robot = Robot(self.client)
+        self.camera = HeightmapCamera(self.client, camera, pixel_size, hidden_bodies=self.world.decorative,
+                                      wall_uids=self.world.wall_uids)
+        self.primitive_runner = Primitives(self.robot, lambda: {o.uid for o in self.world.objects})
+        self.rows, self.cols = self.camera.rows, self.camera.cols
+        self.observation_space = gym.spaces.Box(0, 255, (4, self.rows, self.cols), dtype=np.uint8)
+        self.action_space = gym.spaces.Discrete(len(self.map_names) * self.rows * self.cols)
+        self._regions_mask = np.zeros((params.NUM_CLASSES, self.rows, self.cols), dtype=bool)
+        self._semantic: tuple[np.ndarray, np.ndarray] | None = None
+        self._obs: np.ndarray | None = None
+        self.action_count = 0
+        self.num_unsorted_initial = 0
+
+    # ---- configuration ----------------------------------------------------------------
+    def _check_num_objects(self, n) -> int:
+        if isinstance(n, bool) or not isinstance(n, Integral):
+            raise ValueError(f"num_objects must be an integer, got {n!r}")
+        if not 1 <= n <= self.max_objects:
+            raise ValueError(f"num_objects must be in [1, {self.max_objects}], got {n}")
+        return int(n)
+
+    def set_num_objects(self, n: int) -> None:
+        """Number of objects from the next reset on (for a curriculum)."""
+        self.num_objects = self._check_num_objects(n)
+
+    # ---- episode ----------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, Integral) or seed < 0):
+            raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+        super().reset(seed=None if seed is None else int(seed))
+        options = dict(options or {})
+        unknown = set(options) - {"num_objects"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; known: ['num_objects']")
+        if "num_objects" in options:
+            self.set_num_objects(options["num_objects"])
+        self._spawn(self.num_objects)
+        self.action_count = 0
+        self.num_unsorted_initial = int((~self.world.in_own_region()).sum())
+        self._obs = self._observe()
+        return self._obs.copy(), self._info(primitive=None, fell=False)
+
+    def _spawn(self, n: int) -> None:
+        rng = self.np_random
+        for _ in range(SPAWN_TRIES):
+            self.robot.release()
+            self.robot.go_home()
+            self.world.clear_objects()
+            specs = sample_specs(self.object_set, n, rng)
+            classes = rng.integers(0, params.NUM_CLASSES, size=n)
+            area = np.array([sum(s.footprint_area for s, c in zip(specs, classes) if c == k)
+                             for k in range(params.NUM_CLASSES)])
+            regions = sample_regions(rng, area)
+            if regions is None:
+                continue
+            layout = self.world.sample_layout(specs, rng)
+            if layout is None:
+                continue
+            self.world.regions = regions
+            for spec, cls, (x, y, yaw) in zip(specs, classes, layout):
+                obj = self.world.add_object(spec, int(cls), x, y, yaw)
+                # the person's view shows each object in its class colour, as in Fig. 7
+                rgba = tuple(CLASS_RGB[int(cls)] / 255.0) + (1.0,)
+                pb.changeVisualShape(obj.uid, -1, rgbaColor=rgba, physicsClientId=self.client)
+            self.world.settle()
+            pos = self.world.positions()
+            if self.world.inside(pos).all() and self.world.at_rest().all() and not self.world.in_own_region(pos).all():
+                self._regions_mask = region_masks(regions, self.rows, self.cols, self.camera.pixel_size)
+                return
+        raise RuntimeError(f"could not spawn {n} {self.object_set!r} objects in {SPAWN_TRIES} tries")
+
+    def _class_of_uid(self, classes: np.ndarray | None = None) -> dict[int, int]:
+        classes = self.world.classes() if classes is None else classes
+        return {o.uid: int(c) for o, c in zip(self.world.objects, classes)}
+
+    def _observe(self) -> np.ndarray:
+        uids = np.array([o.uid for o in self.world.objects], dtype=np.int64)
+        self._semantic = self.camera.semantic_map(uids)
+        return recolour(*self._semantic, self._class_of_uid(), self._regions_mask)
+
+    def decode_action(self, action) -> tuple[str, int, int]:
+        """(map name, row, col) of a flat action index; ValueError if it is not one."""
+        if isinstance(action, np.ndarray):
+            if action.size != 1:
+                raise ValueError(f"action must be a single integer, got an array of shape {action.shape}")
+            action = action.reshape(()).item()
+        if isinstance(action, bool) or not isinstance(action, Integral):
+            raise ValueError(f"action must be an integer, got {action!r}")
+        if not 0 <= action < self.action_space.n:
+            raise ValueError(f"action {action} out of range [0, {self.action_space.n})")
+        m, rest = divmod(int(action), self.rows * self.cols)
+        row, col = divmod(rest, self.cols)
+        return self.map_names[m], row, col
+
+    def step(self, action):
+        if self._obs is None:
+            raise RuntimeError("call reset() before step()")
+        name, row, col = self.decode_action(action)
+        prev_semantic = self._semantic
+        x, y = self.camera.cell_centre(row, col)
+        x = float(np.clip(x, 0.0, ACTION_X_MAX))
+        y = float(np.clip(y, -ACTION_Y_MAX, ACTION_Y_MAX))
+        if name == "pick":
+            surface = float(prev_semantic[1][row, col])
+            self.primitive_runner.pick_and_place(x, y, surface, self._place_for)
+        else:
+            self.primitive_runner.push(x, y, +1.0 if name == "push_left" else -1.0)
+        self.robot.release()
+        self.world.settle(step_fn=self.robot.step)
+        self.action_count += 1
+
+        pos = self.world.positions()
+        inside = self.world.inside(pos)
+        resting = self.world.at_rest()
+        fell = bool((~inside).any())
+        for obj, ok in zip(list(self.world.objects), inside):
+            if not ok:  # it left the cabinet: remove it so it cannot roll around forever
+                self.world.remove_object(obj)
+        valid = not fell and bool(resting.all())
+        sorted_ = valid and bool(self.world.in_own_region().all())
+        if not valid:
+            reward = params.REWARD_INVALID
+        elif sorted_:
+            reward = params.REWARD_SORTED
+        else:
+            reward = params.REWARD_STEP
+        terminated = sorted_ or not valid
+        truncated = not terminated and self.action_count >= self.max_actions
+        prev_obs = self._obs
+        self._obs = self._observe()
+        info = self._info(primitive=name, fell=fell)
+        if valid and not sorted_:
+            region = self.world.region_of(self.world.positions())
+            if (region >= 0).all():
+                relabel = self._class_of_uid(region)
+                info["relabelled"] = {
+                    "obs": recolour(*prev_semantic, relabel, self._regions_mask),
+                    "next_obs": recolour(*self._semantic, relabel, self._regions_mask),
+                    "reward": params.REWARD_SORTED,
+                    "terminated": True,
+                }
+        del prev_obs
+        return self._obs.copy(), float(reward), bool(terminated), bool(truncated), info
+
+    def _place_for(self, uid: int) -> tuple[float, float]:
+        obj = next(o for o in self.world.objects if o.uid == uid)
+        cell_uid, _ = self._semantic
+        aabb_min, aabb_max = pb.getAABB(uid, physicsClientId=self.client)
+        footprint = (aabb_max[0] - aabb_min[0], aabb_max[1] - aabb_min[1])
+        x, y = place_position(cell_uid, self._class_of_uid(), self._regions_mask[obj.cls], obj.cls,
+                              footprint, self.camera.pixel_size, ignore_uid=uid)
+        return float(np.clip(x, 0.0, ACTION_X_MAX)), float(np.clip(y, -ACTION_Y_MAX, ACTION_Y_MAX))
+
+    def _info(self, primitive: str | None, fell: bool) -> dict:
+        in_own = self.world.in_own_region() if self.world.objects else np.zeros(0, bool)
+        n_sorted = int(in_own.sum())
+        return {
+            "is_success": bool(not fell and len(in_own) == self.num_objects and in_own.all()
+                               and self.world.at_rest().all()),
+            "num_objects": self.num_objects,
+            "num_sorted": n_sorted,
+            "num_unsorted_initial": self.num_unsorted_initial,
+            "fell": fell,
+            "primitive": primitive,
+            "action_count": self.action_count,
+        }
+
+    # ---- viewing ------------------------------------------------------------------------
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        view = pb.computeViewMatrix((-0.80, 0.30, 0.58), (0.20, 0.0, 0.0), (0, 0, 1), physicsClientId=self.client)
+        proj = pb.computeProjectionMatrixFOV(50, 4 / 3, 0.05, 6.0, physicsClientId=self.client)
+        _, _, rgb, _, _ = pb.getCameraImage(640, 480, view, proj, renderer=pb.ER_TINY_RENDERER,
+                                            physicsClientId=self.client)
+        return np.asarray(rgb, dtype=np.uint8).reshape(480, 640, 4)[..., :3].copy()
+
+    def close(self) -> None:
+        if getattr(self, "client", None) is not None and pb.isConnected(self.client):
+            pb.disconnect(self.client)
+        self.client = None

@@ -1,0 +1,315 @@
+"""The UR5 with its pushing blade and suction cup, and the two motion primitives (§IV-B).
+
+Motion model. Every motion that enters the cabinet is simulated: the tool-centre point (TCP, the
+lip of the suction cup) follows a straight line, the closed-form IK (`shelf_env.kinematics`)
+turns the line into joint targets every centimetre, and the UR5's joint motors track them while
+PyBullet steps, so the arm, blade, cup and any held object collide with the cabinet and the
+objects. Motions *outside* the cabinet (home <-> the pre-approach pose in front of the opening,
+and the transfer between the pick and the place pre-approach poses) are teleported: they happen
+in free space in front of the cabinet, where nothing can be touched, so skipping them changes
+nothing inside and saves ~60 % of the physics steps. The arm is at home (out of the camera's
+view) whenever the camera captures.
+
+Suction (as in Ravens): when the cup touches an object at the end of its descent, a fixed
+constraint is created between cup and object; releasing removes it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import resources
+
+import numpy as np
+import pybullet as pb
+
+from shelf_env import kinematics, params
+
+# Tool geometry (must match assets/ur5_blade.urdf): TCP in the ee_link frame, and heights of the
+# blade relative to the TCP.
+TCP_IN_EE = np.array([0.435, 0.0, -0.07])
+BLADE_MID_ABOVE_TCP = 0.035
+TOOL_TOP_ABOVE_TCP = 0.08
+# ee_link expressed in the DH flange frame (checked against PyBullet in tests/test_robot.py).
+EE_IN_FLANGE = np.array([[0.0, -1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0, 0, 0, 1.0]])
+# URDF base_link to DH base: a half turn about z.
+DH_BASE_IN_URDF = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+ARM_JOINTS = 6
+OUTSIDE_X_MIN = -0.10  # furthest TCP retreat in front of the opening (reach limit)
+JOINT_FORCES = np.array([150.0, 150.0, 150.0, 28.0, 28.0, 28.0]) * 2.0
+
+
+@dataclass
+class MotionConfig:
+    """Speeds and clearances of the primitives (m/s, m)."""
+
+    approach_speed: float = 0.25
+    push_speed: float = 0.10
+    vertical_speed: float = 0.05
+    outside_x: float = -0.06  # TCP x of the pre-approach pose in front of the opening
+    waypoint_spacing: float = 0.01
+    pick_clearance: float = 0.015  # approach height above the observed surface
+    lift: float = 0.015  # lift after gripping
+    ceiling_clearance: float = 0.005
+    release_gap: float = 0.004  # held object's bottom above the floor when released
+    suction_force: float = 60.0
+
+
+class Robot:
+    """UR5 + blade + suction cup in a PyBullet client."""
+
+    def __init__(self, client: int, base_position=(-0.75, 0.0, 0.0), motion: MotionConfig | None = None):
+        self.client = client
+        self.motion = motion or MotionConfig()
+        urdf = str(resources.files("shelf_env") / "assets" / "ur5_blade.urdf")
+        self.uid = pb.loadURDF(urdf, basePosition=base_position, useFixedBase=True,
+                               flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
+        names = {pb.getJointInfo(self.uid, j, physicsClientId=client)[12].decode(): j
+                 for j in range(pb.getNumJoints(self.uid, physicsClientId=client))}
+        self.cup_link = names["cup_link"]
+        self.tcp_link = names["tcp"]
+        self.joints = list(range(ARM_JOINTS))
+        base = np.eye(4)
+        base[:3, 3] = base_position
+        self.world_from_dh = base @ DH_BASE_IN_URDF
+        self.dh_from_world = np.linalg.inv(self.world_from_dh)
+        # Pedestal under the base, for looks and so nothing falls through it.
+        half = (0.09, 0.09, (base_position[2] - params.GROUND_Z) / 2)
+        col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=client)
+        vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=(0.3, 0.3, 0.32, 1), physicsClientId=client)
+        centre = (base_position[0], base_position[1], params.GROUND_Z + half[2])
+        self.pedestal_uid = pb.createMultiBody(0, col, vis, centre, physicsClientId=client)
+        # Working posture: elbow up, wrist above the tool. Every IK solution is taken nearest it.
+        self.q_ref = self._posture_for(np.array([0.15, 0.0, 0.10]))
+        self.q_home = np.array([self.q_ref[0], -2.6, 2.3, -1.3, self.q_ref[4], self.q_ref[5]])
+        self.held: tuple[int, int] | None = None  # (object uid, constraint id)
+        self.physics_steps = 0
+        self.go_home()
+
+    # ---- kinematics ----------------------------------------------------------------------
+    def _flange_poses(self, tcp: np.ndarray) -> np.ndarray:
+        """DH flange poses (K, 4, 4) that put the TCP at ``tcp`` (K, 3) with the tool level,
+        pointing +x (into the cabinet) and the blade vertical."""
+        ee = np.tile(np.eye(4), (len(tcp), 1, 1))
+        ee[:, :3, 3] = tcp - TCP_IN_EE
+        return self.dh_from_world @ ee @ np.linalg.inv(EE_IN_FLANGE)
+
+    def _posture_for(self, tcp: np.ndarray) -> np.ndarray:
+        sols = kinematics.inverse_all(self._flange_poses(tcp[None]))[0]
+        ok = ~np.isnan(sols).any(1)
+        # elbow-up branch whose forearm stays above the upper arm: largest elbow-joint height
+        best, best_z = None, -np.inf
+        for q in sols[ok]:
+            frames = self.world_from_dh @ kinematics.forward(q[None])[0]
+            elbow_z = self._elbow_height(q)
+            if frames[2, 2] > -0.5 and elbow_z > best_z:
+                best, best_z = q, elbow_z
+        if best is None:
+            raise RuntimeError("no IK solution for the working posture; check the base position")
+        # keep every joint far from its +-2 pi limit: solutions are unwrapped towards this
+        return (best + np.pi) % (2 * np.pi) - np.pi
+
+    def _elbow_height(self, q: np.ndarray) -> float:
+        t = kinematics._dh(np.array([q[0]]), 0) @ kinematics._dh(np.array([q[1]]), 1)
+        return float((self.world_from_dh @ t[0])[2, 3])
+
+    def ik(self, tcp: np.ndarray) -> np.ndarray:
+        """Joint angles (K, 6) for TCP positions (K, 3), on the working posture's branch."""
+        return kinematics.inverse_near(self._flange_poses(np.atleast_2d(tcp)), self.q_ref)
+
+    def tcp_position(self) -> np.ndarray:
+        return np.asarray(pb.getLinkState(self.uid, self.tcp_link, computeForwardKinematics=True,
+                                          physicsClientId=self.client)[4])
+
+    # ---- low-level motion ----------------------------------------------------------------
+    def _set_joints(self, q: np.ndarray) -> None:
+        for j, angle in zip(self.joints, q):
+            pb.resetJointState(self.uid, j, float(angle), 0.0, physicsClientId=self.client)
+        self._command(q, np.zeros(ARM_JOINTS))
+        self.q_cmd = np.array(q, dtype=float)
+
+    def _command(self, q: np.ndarray, dq: np.ndarray) -> None:
+        pb.setJointMotorControlArray(
+            self.uid, self.joints, pb.POSITION_CONTROL, targetPositions=q, targetVelocities=dq,
+            forces=JOINT_FORCES, positionGains=[0.3] * ARM_JOINTS, velocityGains=[1.0] * ARM_JOINTS,
+            physicsClientId=self.client,
+        )
+
+    def step(self) -> None:
+        pb.stepSimulation(physicsClientId=self.client)
+        self.physics_steps += 1
+
+    def teleport(self, tcp: np.ndarray) -> None:
+        """Put the arm (and a held object) at a TCP position without simulating the way there.
+        Only used outside the cabinet; see the module docstring."""
+        q = self.ik(np.asarray(tcp, dtype=float))[0]
+        if self.held is None:
+            self._set_joints(q)
+            return
+        obj, _ = self.held
+        cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
+                                           physicsClientId=self.client)[:2]
+        obj_pos, obj_orn = pb.getBasePositionAndOrientation(obj, physicsClientId=self.client)
+        inv_pos, inv_orn = pb.invertTransform(cup_pos, cup_orn)
+        rel = pb.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+        self._set_joints(q)
+        cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
+                                           physicsClientId=self.client)[:2]
+        pos, orn = pb.multiplyTransforms(cup_pos, cup_orn, *rel)
+        pb.resetBasePositionAndOrientation(obj, pos, orn, physicsClientId=self.client)
+        pb.resetBaseVelocity(obj, (0, 0, 0), (0, 0, 0), physicsClientId=self.client)
+
+    def go_home(self) -> None:
+        self._set_joints(self.q_home)
+
+    def move_linear(self, start: np.ndarray, end: np.ndarray, speed: float,
+                    stop: Callable[[], bool] | None = None, check_every: int = 2) -> bool:
+        """Move the TCP along the segment start -> end at ``speed``; True if ``stop`` fired.
+
+        IK at waypoints ``waypoint_spacing`` apart; joint targets interpolated per physics step
+        with feed-forward velocities. The step count is fixed by the segment length, so a motion
+        can never run away.
+        """
+        start, end = np.asarray(start, float), np.asarray(end, float)
+        length = float(np.linalg.norm(end - start))
+        n_steps = max(1, int(np.ceil(length / (speed * params.TIME_STEP))))
+        n_way = max(2, int(np.ceil(length / self.motion.waypoint_spacing)) + 1)
+        s_way = np.linspace(0.0, 1.0, n_way)
+        q_way = self.ik(start + s_way[:, None] * (end - start))
+        s_step = np.arange(1, n_steps + 1) / n_steps
+        q_path = np.stack([np.interp(s_step, s_way, q_way[:, j]) for j in range(ARM_JOINTS)], axis=1)
+        dq_path = np.gradient(q_path, params.TIME_STEP, axis=0) if n_steps > 1 else np.zeros_like(q_path)
+        for i in range(n_steps):
+            self._command(q_path[i], dq_path[i])
+            self.step()
+            self.q_cmd = q_path[i]
+            if stop is not None and i % check_every == 0 and stop():
+                return True
+        return False
+
+    def hold_still(self, steps: int) -> None:
+        self._command(self.q_cmd, np.zeros(ARM_JOINTS))
+        for _ in range(steps):
+            self.step()
+
+    # ---- suction -------------------------------------------------------------------------
+    def cup_contacts(self, exclude: set[int] | None = None) -> list[int]:
+        """Bodies touching the suction cup."""
+        pts = pb.getContactPoints(bodyA=self.uid, linkIndexA=self.cup_link, physicsClientId=self.client)
+        return [p[2] for p in pts if exclude is None or p[2] not in exclude]
+
+    def grip(self, obj: int) -> None:
+        cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, physicsClientId=self.client)[:2]
+        obj_pos, obj_orn = pb.getBasePositionAndOrientation(obj, physicsClientId=self.client)
+        inv_pos, inv_orn = pb.invertTransform(cup_pos, cup_orn)
+        rel_pos, rel_orn = pb.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+        cid = pb.createConstraint(self.uid, self.cup_link, obj, -1, pb.JOINT_FIXED, (0, 0, 0),
+                                  rel_pos, (0, 0, 0), rel_orn, (0, 0, 0, 1), physicsClientId=self.client)
+        pb.changeConstraint(cid, maxForce=self.motion.suction_force, physicsClientId=self.client)
+        self.held = (obj, cid)
+
+    def release(self) -> None:
+        if self.held is not None:
+            pb.removeConstraint(self.held[1], physicsClientId=self.client)
+            self.held = None
+
+
+def _z_max(motion: MotionConfig) -> float:
+    """Highest TCP height that keeps the tool under the cabinet ceiling."""
+    return params.CABINET_HEIGHT - TOOL_TOP_ABOVE_TCP - motion.ceiling_clearance
+
+
+class Primitives:
+    """Push and pick-and-place (§IV-B) executed by a :class:`Robot` on object bodies."""
+
+    def __init__(self, robot: Robot, object_uids: Callable[[], set[int]]):
+        self.robot = robot
+        self.object_uids = object_uids
+
+    def push(self, x: float, y: float, direction: float,
+             length: float = params.PUSH_LENGTH, height: float = params.PUSH_HEIGHT) -> None:
+        """Straight push: in at (x, y) with the blade's middle at ``height``, ``length`` along
+        +y (``direction`` = +1, the camera's left) or -y (-1), and back out the same way."""
+        r, m = self.robot, self.robot.motion
+        z = height - BLADE_MID_ABOVE_TCP
+        outside = np.array([m.outside_x, y, z])
+        start = np.array([x, y, z])
+        end = start + np.array([0.0, direction * length, 0.0])
+        r.teleport(outside)
+        r.move_linear(outside, start, m.approach_speed)
+        r.move_linear(start, end, m.push_speed)
+        r.move_linear(end, start, m.push_speed)
+        r.move_linear(start, outside, m.approach_speed)
+        r.go_home()
+
+    def pick_and_place(self, x: float, y: float, surface_z: float,
+                       place: Callable[[int], tuple[float, float] | None]) -> int | None:
+        """Pick at (x, y) from the observed surface height ``surface_z``; place where
+        ``place(uid)`` says. Returns the uid of the object picked, or None if the cup found
+        nothing to grip."""
+        r, m = self.robot, self.robot.motion
+        z_max = _z_max(m)
+        z_app = min(surface_z + m.pick_clearance, z_max)
+        z_low = max(surface_z - 0.01, 0.0)
+        outside = np.array([m.outside_x, y, z_app])
+        above = np.array([x, y, z_app])
+        r.teleport(outside)
+        r.move_linear(outside, above, m.approach_speed)
+        objects = self.object_uids()
+        touched: list[int] = []
+
+        def touching() -> bool:
+            touched[:] = [b for b in r.cup_contacts() if b in objects]
+            return bool(touched)
+
+        r.move_linear(above, np.array([x, y, z_low]), m.vertical_speed, stop=touching, check_every=1)
+        if not touched:
+            touching()
+        if not touched:
+            here = np.array([x, y, z_low])
+            r.move_linear(here, above, m.vertical_speed)
+            r.move_linear(above, outside, m.approach_speed)
+            r.go_home()
+            return None
+        obj = touched[0]
+        r.grip(obj)
+        here = self._commanded_tcp()
+        z_carry = min(here[2] + m.lift, z_max)
+        lifted = np.array([x, y, z_carry])
+        r.move_linear(here, lifted, m.vertical_speed)
+        # retreat until the held object is out of the opening (it hangs under the cup, so
+        # only the part ahead of the TCP matters); bounded to stay within the arm's reach
+        ahead = pb.getAABB(obj, physicsClientId=r.client)[1][0] - self._commanded_tcp()[0]
+        out_x = float(np.clip(-ahead - 0.01, OUTSIDE_X_MIN, m.outside_x))
+        r.move_linear(lifted, np.array([out_x, y, z_carry]), m.approach_speed)
+        target = place(obj)
+        if target is None:  # nowhere to put it: put it back where it came from
+            target = (x, y)
+        px, py = target
+        hang = self._commanded_tcp()[2] - pb.getAABB(obj, physicsClientId=r.client)[0][2]
+        r.teleport(np.array([out_x, py, z_carry]))
+        r.move_linear(np.array([out_x, py, z_carry]), np.array([px, py, z_carry]), m.approach_speed)
+        z_release = min(max(hang + m.release_gap, 0.0), z_carry)
+        others = objects - {obj}
+
+        def landed() -> bool:
+            pts = pb.getContactPoints(bodyA=obj, physicsClientId=r.client)
+            return any(p[2] in others or p[2] not in (r.uid,) and p[2] not in objects for p in pts)
+
+        r.move_linear(np.array([px, py, z_carry]), np.array([px, py, z_release]), m.vertical_speed,
+                      stop=landed)
+        r.release()
+        r.hold_still(12)
+        here = self._commanded_tcp()
+        r.move_linear(here, np.array([px, py, min(here[2] + m.lift, z_max)]), m.vertical_speed)
+        here = self._commanded_tcp()
+        r.move_linear(here, np.array([m.outside_x, py, here[2]]), m.approach_speed)
+        r.go_home()
+        return obj
+
+    def _commanded_tcp(self) -> np.ndarray:
+        """TCP position of the last commanded joint angles (the path the planner is on)."""
+        frames = self.robot.world_from_dh @ kinematics.forward(self.robot.q_cmd[None])[0]
+        ee = frames @ EE_IN_FLANGE
+        return ee[:3, :3] @ TCP_IN_EE + ee[:3, 3]
