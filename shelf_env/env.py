@@ -38,10 +38,10 @@ import pybullet as pb
 
 from shelf_env import params
 from shelf_env.camera import CLASS_RGB, CameraConfig, HeightmapCamera, recolour, region_masks
-from shelf_env.objects import OBJECT_SETS, sample_specs
+from shelf_env.objects import OBJECT_SETS, ObjectSpec, sample_specs
 from shelf_env.placement import place_position
 from shelf_env.robot import Primitives, Robot
-from shelf_env.world import World, sample_regions
+from shelf_env.world import Region, World, sample_regions
 
 PRIMITIVES = ("pick", "push")
 ACTION_X_MAX = params.CABINET_DEPTH - 0.02
@@ -157,16 +157,44 @@ class ShelfSortEnv(gym.Env):
                 continue
             self.world.regions = regions
             for spec, cls, (x, y, yaw) in zip(specs, classes, layout):
-                obj = self.world.add_object(spec, int(cls), x, y, yaw)
-                # the person's view shows each object in its class colour, as in Fig. 7
-                rgba = tuple(CLASS_RGB[int(cls)] / 255.0) + (1.0,)
-                pb.changeVisualShape(obj.uid, -1, rgbaColor=rgba, physicsClientId=self.client)
+                self._add_object(spec, int(cls), x, y, yaw)
             self.world.settle()
             pos = self.world.positions()
             if self.world.inside(pos).all() and self.world.at_rest().all() and not self.world.in_own_region(pos).all():
                 self._regions_mask = region_masks(regions, self.rows, self.cols, self.camera.pixel_size)
                 return
         raise RuntimeError(f"could not spawn {n} {self.object_set!r} objects in {SPAWN_TRIES} tries")
+
+    def _add_object(self, spec: ObjectSpec, cls: int, x: float, y: float, yaw: float) -> None:
+        obj = self.world.add_object(spec, cls, x, y, yaw)
+        # the person's view shows each object in its class colour, as in Fig. 7
+        rgba = tuple(CLASS_RGB[cls] / 255.0) + (1.0,)
+        pb.changeVisualShape(obj.uid, -1, rgbaColor=rgba, physicsClientId=self.client)
+
+    def set_scene(self, objects: list[tuple[ObjectSpec, int, float, float, float]],
+                  regions: list[Region]) -> tuple[np.ndarray, dict]:
+        """Replace the episode's scene by a crafted one (for tests, demos and evaluation of
+        hand-made cases): ``objects`` as (spec, class, x, y, yaw) resting on the floor,
+        one :class:`Region` per class. Returns the new (observation, info), like reset."""
+        if len(regions) != params.NUM_CLASSES:
+            raise ValueError(f"need {params.NUM_CLASSES} regions, got {len(regions)}")
+        if not 1 <= len(objects) <= self.max_objects:
+            raise ValueError(f"need 1..{self.max_objects} objects, got {len(objects)}")
+        self.robot.release()
+        self.robot.go_home()
+        self.world.clear_objects()
+        self.world.regions = list(regions)
+        for spec, cls, x, y, yaw in objects:
+            if not 0 <= cls < params.NUM_CLASSES:
+                raise ValueError(f"class must be in [0, {params.NUM_CLASSES}), got {cls}")
+            self._add_object(spec, int(cls), x, y, yaw)
+        self.world.settle()
+        self._regions_mask = region_masks(self.world.regions, self.rows, self.cols, self.camera.pixel_size)
+        self.num_objects = len(objects)
+        self.action_count = 0
+        self.num_unsorted_initial = int((~self.world.in_own_region()).sum())
+        self._obs = self._observe()
+        return self._obs.copy(), self._info(primitive=None, fell=False)
 
     def _class_of_uid(self, classes: np.ndarray | None = None) -> dict[int, int]:
         classes = self.world.classes() if classes is None else classes

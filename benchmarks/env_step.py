@@ -1,0 +1,80 @@
+"""Throughput of ShelfSort-v0 steps, and their overhead over the physics + rendering floor.
+
+    python benchmarks/env_step.py [--steps 30] [--seed 0]
+
+For N = 1, 8, 14 objects it runs a fixed mix of picks and pushes on object pixels and prints
+actions/s and, per step, the ratio of the step's wall time to its floor measured in the same
+run: the time of the step's own physics steps (pybullet.stepSimulation calls) plus the time of
+its one camera render. Everything else (IK, motor commands, heightmap, recolouring, reward,
+checks) is the overhead; the target is a ratio <= 1.3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import pybullet as pb
+
+from shelf_env.env import ShelfSortEnv
+
+
+class Timed:
+    """Accumulates the wall time of calls to a function."""
+
+    def __init__(self, fn):
+        self.fn, self.total = fn, 0.0
+
+    def __call__(self, *args, **kwargs):
+        t = time.perf_counter()
+        try:
+            return self.fn(*args, **kwargs)
+        finally:
+            self.total += time.perf_counter() - t
+
+
+def run(n: int, steps: int, seed: int) -> tuple[float, float, float]:
+    env = ShelfSortEnv(num_objects=n, max_actions=10_000)
+    client = env.client
+    physics = Timed(lambda: pb.stepSimulation(physicsClientId=client))
+    env.robot.step = lambda: (physics(), setattr(env.robot, "physics_steps", env.robot.physics_steps + 1))
+    render = Timed(env.camera.render)
+    env.camera.render = render
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    wall = floor = 0.0
+    done = 0
+    while done < steps:
+        cells = np.argwhere(env._semantic[0] >= 0)
+        if len(cells) == 0:
+            env.reset()
+            continue
+        r, c = cells[rng.integers(len(cells))]
+        m = int(rng.integers(len(env.map_names)))
+        action = m * env.rows * env.cols + r * env.cols + c
+        physics.total = render.total = 0.0
+        t = time.perf_counter()
+        _, _, terminated, truncated, _ = env.step(action)
+        wall += time.perf_counter() - t
+        floor += physics.total + render.total
+        done += 1
+        if terminated or truncated:
+            env.reset()
+    env.close()
+    return steps / wall, wall / steps, wall / floor
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=30)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    print(f"{'N':>3} {'actions/s':>10} {'ms/step':>8} {'step/floor':>11}")
+    for n in (1, 8, 14):
+        rate, per_step, ratio = run(n, args.steps, args.seed)
+        print(f"{n:>3} {rate:>10.2f} {per_step * 1e3:>8.0f} {ratio:>11.3f}")
+
+
+if __name__ == "__main__":
+    main()

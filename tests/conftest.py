@@ -1,0 +1,27 @@
+import gymnasium as gym
+import pytest
+
+import shelf_env  # noqa: F401
+from shelf_env.objects import ObjectSpec
+from shelf_env.world import Region
+
+# Three side-by-side regions spanning the full depth: left (+y) green, middle yellow, right blue.
+REGIONS = [Region(0.0, 0.40, 0.12, 0.30), Region(0.0, 0.40, -0.09, 0.09), Region(0.0, 0.40, -0.30, -0.12)]
+
+
+def box(sx=0.06, sy=0.06, h=0.08, mass=0.3) -> ObjectSpec:
+    return ObjectSpec("cuboid", "box", (sx, sy, h), mass)
+
+
+@pytest.fixture
+def env():
+    e = gym.make("ShelfSort-v0", num_objects=3).unwrapped
+    e.reset(seed=0)
+    yield e
+    e.close()
+
+
+def action_at(env, map_name: str, x: float, y: float) -> int:
+    """Flat action index of the cell containing cabinet point (x, y) on the named map."""
+    row, col = env.camera.cell_of(x, y)
+    return env.map_names.index(map_name) * env.rows * env.cols + row * env.cols + col

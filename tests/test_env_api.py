@@ -1,0 +1,128 @@
+"""ShelfSort-v0's Gymnasium contract: spaces, seeding, bad input, body bookkeeping."""
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pybullet as pb
+import pytest
+from stable_baselines3.common.env_checker import check_env
+
+from shelf_env.env import ShelfSortEnv, map_names
+
+
+def test_check_env_passes_without_warnings():
+    env = gym.make("ShelfSort-v0", num_objects=2).unwrapped
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, warn=True)
+    env.close()
+    assert [str(w.message) for w in caught] == []
+
+
+def test_spaces_and_map_layout():
+    env = ShelfSortEnv(num_objects=1)
+    assert env.observation_space.shape == (4, 80, 120) and env.observation_space.dtype == np.uint8
+    assert env.action_space.n == 3 * 80 * 120
+    assert env.map_names == ["pick", "push_left", "push_right"]
+    env.close()
+    s = ShelfSortEnv(num_objects=1, primitives=("pick",), pixel_size=0.01)
+    assert s.observation_space.shape == (4, 40, 60) and s.action_space.n == 40 * 60
+    assert map_names(("pick",)) == ["pick"]
+    s.close()
+
+
+def test_same_seed_gives_identical_observation_sequence():
+    def rollout():
+        env = gym.make("ShelfSort-v0", num_objects=3).unwrapped
+        obs, _ = env.reset(seed=7)
+        seq = [obs]
+        rng = np.random.default_rng(1)
+        for _ in range(3):
+            obj_cells = np.argwhere(env._semantic[0] >= 0)
+            r, c = obj_cells[rng.integers(len(obj_cells))]
+            a = int(rng.integers(3)) * env.rows * env.cols + r * env.cols + c
+            obs, *_ = env.step(a)
+            seq.append(obs)
+        again, _ = env.reset(seed=7)
+        env.close()
+        return seq, again
+
+    a, a_again = rollout()
+    b, _ = rollout()
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert np.array_equal(a[0], a_again)  # the same env re-seeded starts from the same scene
+    assert not all(np.array_equal(a[0], x) for x in a[1:])  # the actions did change the scene
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"num_objects": 0}, "num_objects"),
+    ({"num_objects": 15}, r"num_objects must be in \[1, 14\]"),
+    ({"num_objects": "3"}, "num_objects must be an integer"),
+    ({"object_set": "shoes"}, "unknown object_set"),
+    ({"primitives": ("grasp",)}, "primitives"),
+    ({"primitives": ()}, "primitives"),
+    ({"render_mode": "human"}, "render_mode"),
+    ({"max_actions": 0}, "max_actions"),
+])
+def test_bad_constructor_arguments_raise_clear_errors(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        ShelfSortEnv(**kwargs)
+
+
+def test_bad_step_reset_arguments_raise_clear_errors(env):
+    n = env.action_space.n
+    for bad, match in [(-1, "out of range"), (n, "out of range"), (1.5, "integer"), ("3", "integer"),
+                       (np.array([1, 2]), "single integer")]:
+        with pytest.raises(ValueError, match=match):
+            env.step(bad)
+    with pytest.raises(ValueError, match="seed"):
+        env.reset(seed="abc")
+    with pytest.raises(ValueError, match="seed"):
+        env.reset(seed=-1)
+    with pytest.raises(ValueError, match="unknown reset options"):
+        env.reset(options={"n_objects": 3})
+    with pytest.raises(ValueError, match="num_objects"):
+        env.set_num_objects(99)
+    # the env still works after all of that
+    obs, info = env.reset(seed=1, options={"num_objects": 4})
+    assert info["num_objects"] == 4 and obs.shape == (4, 80, 120)
+    env.step(np.int64(5))
+
+
+def test_set_num_objects_applies_from_next_reset(env):
+    env.set_num_objects(5)
+    _, info = env.reset(seed=3)
+    assert info["num_objects"] == 5 and len(env.world.objects) == 5
+
+
+def test_render_gives_a_picture_and_close_releases_client():
+    env = ShelfSortEnv(num_objects=2, render_mode="rgb_array")
+    env.reset(seed=0)
+    img = env.render()
+    assert img.shape == (480, 640, 3) and img.dtype == np.uint8 and img.std() > 10
+    client = env.client
+    env.close()
+    assert not pb.isConnected(client)
+    env.close()  # idempotent
+
+
+def _body_count_stays_constant(resets: int):
+    env = ShelfSortEnv(num_objects=1)
+    env.reset(seed=0)
+    static = pb.getNumBodies(physicsClientId=env.client) - len(env.world.objects)
+    rng = np.random.default_rng(0)
+    for i in range(resets):
+        n = int(rng.integers(1, 15))
+        env.reset(seed=i, options={"num_objects": n})
+        assert pb.getNumBodies(physicsClientId=env.client) == static + n
+    env.close()
+
+
+def test_resets_keep_body_count_constant():
+    _body_count_stays_constant(40)
+
+
+@pytest.mark.slow
+def test_thousand_resets_keep_body_count_constant():
+    _body_count_stays_constant(1000)
