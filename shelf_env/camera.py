@@ -45,6 +45,13 @@ class CameraConfig:
     depth_tolerance: float = 0.01  # metres: "sees this point" when depths agree this well
 
 
+def cell_centres(rows: int, cols: int, pixel_size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cabinet x of every heightmap row (back -> front) and y of every column (left -> right)."""
+    x = params.CABINET_DEPTH - (np.arange(rows) + 0.5) * pixel_size
+    y = params.CABINET_WIDTH / 2 - (np.arange(cols) + 0.5) * pixel_size
+    return x, y
+
+
 def _look_at(cfg: CameraConfig) -> np.ndarray:
     """Rotation whose rows are the camera's right, up and forward axes in the world."""
     pos, tgt = np.array(cfg.position), np.array(cfg.target)
@@ -98,8 +105,7 @@ class HeightmapCamera:
         self._pix = np.flatnonzero(through.ravel())
         self._rays = rays.reshape(-1, 3)[self._pix]
         # cell centres (rows: back -> front, cols: camera's left -> right)
-        self.cell_x = d - (np.arange(self.rows) + 0.5) * pixel_size
-        self.cell_y = w / 2 - (np.arange(self.cols) + 0.5) * pixel_size
+        self.cell_x, self.cell_y = cell_centres(self.rows, self.cols, pixel_size)
         cx, cy = np.meshgrid(self.cell_x, self.cell_y, indexing="ij")
         self._cell_xy = np.stack([cx.ravel(), cy.ravel()], axis=1)
         self._floor_uv, self._floor_depth = self.project(np.c_[self._cell_xy, np.zeros(len(self._cell_xy))])
@@ -196,8 +202,7 @@ class HeightmapCamera:
 
 def region_masks(regions, rows: int, cols: int, pixel_size: float) -> np.ndarray:
     """Boolean (K, H, W): which cells' centres lie in each target region."""
-    x = params.CABINET_DEPTH - (np.arange(rows) + 0.5) * pixel_size
-    y = params.CABINET_WIDTH / 2 - (np.arange(cols) + 0.5) * pixel_size
+    x, y = cell_centres(rows, cols, pixel_size)
     out = np.zeros((len(regions), rows, cols), dtype=bool)
     for k, r in enumerate(regions):
         out[k] = ((x >= r.x0) & (x <= r.x1))[:, None] & ((y >= r.y0) & (y <= r.y1))[None, :]

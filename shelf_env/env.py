@@ -134,17 +134,26 @@ class ShelfSortEnv(gym.Env):
         if "num_objects" in options:
             self.set_num_objects(options["num_objects"])
         self._spawn(self.num_objects)
+        return self._begin_episode()
+
+    def _clear_scene(self) -> None:
+        self.robot.release()
+        self.robot.go_home()
+        self.world.clear_objects()
+
+    def _begin_episode(self) -> tuple[np.ndarray, dict]:
+        """Counters, masks and first observation of a freshly built scene (reset, set_scene)."""
+        self._regions_mask = region_masks(self.world.regions, self.rows, self.cols, self.camera.pixel_size)
         self.action_count = 0
-        self.num_unsorted_initial = int((~self.world.in_own_region()).sum())
+        region = self.world.region_of(self.world.positions())
+        self.num_unsorted_initial = int((region != self.world.classes()).sum())
         self._obs = self._observe()
-        return self._obs.copy(), self._info(primitive=None, fell=False)
+        return self._obs.copy(), self._info(None, False, region, self.world.at_rest())
 
     def _spawn(self, n: int) -> None:
         rng = self.np_random
         for _ in range(SPAWN_TRIES):
-            self.robot.release()
-            self.robot.go_home()
-            self.world.clear_objects()
+            self._clear_scene()
             specs = sample_specs(self.object_set, n, rng)
             classes = rng.integers(0, params.NUM_CLASSES, size=n)
             area = np.array([sum(s.footprint_area for s, c in zip(specs, classes) if c == k)
@@ -161,7 +170,6 @@ class ShelfSortEnv(gym.Env):
             self.world.settle()
             pos = self.world.positions()
             if self.world.inside(pos).all() and self.world.at_rest().all() and not self.world.in_own_region(pos).all():
-                self._regions_mask = region_masks(regions, self.rows, self.cols, self.camera.pixel_size)
                 return
         raise RuntimeError(f"could not spawn {n} {self.object_set!r} objects in {SPAWN_TRIES} tries")
 
@@ -180,21 +188,16 @@ class ShelfSortEnv(gym.Env):
             raise ValueError(f"need {params.NUM_CLASSES} regions, got {len(regions)}")
         if not 1 <= len(objects) <= self.max_objects:
             raise ValueError(f"need 1..{self.max_objects} objects, got {len(objects)}")
-        self.robot.release()
-        self.robot.go_home()
-        self.world.clear_objects()
+        bad = [cls for _, cls, *_ in objects if not 0 <= cls < params.NUM_CLASSES]
+        if bad:
+            raise ValueError(f"class must be in [0, {params.NUM_CLASSES}), got {bad[0]}")
+        self._clear_scene()
         self.world.regions = list(regions)
         for spec, cls, x, y, yaw in objects:
-            if not 0 <= cls < params.NUM_CLASSES:
-                raise ValueError(f"class must be in [0, {params.NUM_CLASSES}), got {cls}")
             self._add_object(spec, int(cls), x, y, yaw)
         self.world.settle()
-        self._regions_mask = region_masks(self.world.regions, self.rows, self.cols, self.camera.pixel_size)
         self.num_objects = len(objects)
-        self.action_count = 0
-        self.num_unsorted_initial = int((~self.world.in_own_region()).sum())
-        self._obs = self._observe()
-        return self._obs.copy(), self._info(primitive=None, fell=False)
+        return self._begin_episode()
 
     def _class_of_uid(self, classes: np.ndarray | None = None) -> dict[int, int]:
         classes = self.world.classes() if classes is None else classes
@@ -224,9 +227,7 @@ class ShelfSortEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         name, row, col = self.decode_action(action)
         prev_semantic = self._semantic
-        x, y = self.camera.cell_centre(row, col)
-        x = float(np.clip(x, 0.0, ACTION_X_MAX))
-        y = float(np.clip(y, -ACTION_Y_MAX, ACTION_Y_MAX))
+        x, y = self._clip_target(*self.camera.cell_centre(row, col))
         if name == "pick":
             surface = float(prev_semantic[1][row, col])
             self.primitive_runner.pick_and_place(x, y, surface, self._place_for)
@@ -238,13 +239,14 @@ class ShelfSortEnv(gym.Env):
 
         pos = self.world.positions()
         inside = self.world.inside(pos)
-        resting = self.world.at_rest()
+        resting = self.world.at_rest()[inside]
         fell = bool((~inside).any())
         for obj, ok in zip(list(self.world.objects), inside):
             if not ok:  # it left the cabinet: remove it so it cannot roll around forever
                 self.world.remove_object(obj)
+        region = self.world.region_of(pos[inside])
         valid = not fell and bool(resting.all())
-        sorted_ = valid and bool(self.world.in_own_region().all())
+        sorted_ = valid and bool((region == self.world.classes()).all())
         if not valid:
             reward = params.REWARD_INVALID
         elif sorted_:
@@ -253,20 +255,16 @@ class ShelfSortEnv(gym.Env):
             reward = params.REWARD_STEP
         terminated = sorted_ or not valid
         truncated = not terminated and self.action_count >= self.max_actions
-        prev_obs = self._obs
         self._obs = self._observe()
-        info = self._info(primitive=name, fell=fell)
-        if valid and not sorted_:
-            region = self.world.region_of(self.world.positions())
-            if (region >= 0).all():
-                relabel = self._class_of_uid(region)
-                info["relabelled"] = {
-                    "obs": recolour(*prev_semantic, relabel, self._regions_mask),
-                    "next_obs": recolour(*self._semantic, relabel, self._regions_mask),
-                    "reward": params.REWARD_SORTED,
-                    "terminated": True,
-                }
-        del prev_obs
+        info = self._info(name, fell, region, resting)
+        if valid and not sorted_ and (region >= 0).all():
+            relabel = self._class_of_uid(region)
+            info["relabelled"] = {
+                "obs": recolour(*prev_semantic, relabel, self._regions_mask),
+                "next_obs": recolour(*self._semantic, relabel, self._regions_mask),
+                "reward": params.REWARD_SORTED,
+                "terminated": True,
+            }
         return self._obs.copy(), float(reward), bool(terminated), bool(truncated), info
 
     def _place_for(self, uid: int) -> tuple[float, float]:
@@ -274,16 +272,20 @@ class ShelfSortEnv(gym.Env):
         cell_uid, _ = self._semantic
         aabb_min, aabb_max = pb.getAABB(uid, physicsClientId=self.client)
         footprint = (aabb_max[0] - aabb_min[0], aabb_max[1] - aabb_min[1])
-        x, y = place_position(cell_uid, self._class_of_uid(), self._regions_mask[obj.cls], obj.cls,
-                              footprint, self.camera.pixel_size, ignore_uid=uid)
+        return self._clip_target(*place_position(cell_uid, self._class_of_uid(), self._regions_mask[obj.cls],
+                                                 obj.cls, footprint, self.camera.pixel_size, ignore_uid=uid))
+
+    @staticmethod
+    def _clip_target(x: float, y: float) -> tuple[float, float]:
+        """Keep a tool target where the blade's tip and thickness clear the walls."""
         return float(np.clip(x, 0.0, ACTION_X_MAX)), float(np.clip(y, -ACTION_Y_MAX, ACTION_Y_MAX))
 
-    def _info(self, primitive: str | None, fell: bool) -> dict:
-        in_own = self.world.in_own_region() if self.world.objects else np.zeros(0, bool)
+    def _info(self, primitive: str | None, fell: bool, region: np.ndarray, resting: np.ndarray) -> dict:
+        """Info dict from the region index and rest flag of every object still in the world."""
+        in_own = region == self.world.classes()
         n_sorted = int(in_own.sum())
         return {
-            "is_success": bool(not fell and len(in_own) == self.num_objects and in_own.all()
-                               and self.world.at_rest().all()),
+            "is_success": bool(not fell and len(in_own) == self.num_objects and in_own.all() and resting.all()),
             "num_objects": self.num_objects,
             "num_sorted": n_sorted,
             "num_unsorted_initial": self.num_unsorted_initial,

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shelf_env import params
-from shelf_env.camera import FREE
+from shelf_env.camera import FREE, cell_centres
 
 
 @dataclass(frozen=True)
@@ -66,9 +66,8 @@ def place_position(
         if c != cls and uid != ignore_uid:
             other |= cell_uid == uid
     behind = np.vstack([np.zeros((1, cols), np.int64), np.cumsum(other, axis=0)[:-1]])
-    behind_win = _window_sum(behind > 0, 1, kw) if kw > 1 else (behind > 0).astype(np.int64)
-    x = params.CABINET_DEPTH - (np.arange(rows) + 0.5) * pixel_size
-    y = params.CABINET_WIDTH / 2 - (np.arange(cols) + 0.5) * pixel_size
+    behind_win = _window_sum(behind > 0, 1, kw)
+    x, y = cell_centres(rows, cols, pixel_size)
     region_cols = np.flatnonzero(region_mask.any(0))
     yc = y[region_cols].mean() if len(region_cols) else 0.0
     score = (weights.back * x[:, None] - weights.centre * np.abs(y[None, :] - yc)

@@ -148,11 +148,7 @@ class Robot:
             self._set_joints(q)
             return
         obj, _ = self.held
-        cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
-                                           physicsClientId=self.client)[:2]
-        obj_pos, obj_orn = pb.getBasePositionAndOrientation(obj, physicsClientId=self.client)
-        inv_pos, inv_orn = pb.invertTransform(cup_pos, cup_orn)
-        rel = pb.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+        rel = self._object_in_cup(obj)
         self._set_joints(q)
         cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
                                            physicsClientId=self.client)[:2]
@@ -199,11 +195,16 @@ class Robot:
         pts = pb.getContactPoints(bodyA=self.uid, linkIndexA=self.cup_link, physicsClientId=self.client)
         return [p[2] for p in pts if exclude is None or p[2] not in exclude]
 
-    def grip(self, obj: int) -> None:
-        cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, physicsClientId=self.client)[:2]
+    def _object_in_cup(self, obj: int) -> tuple[tuple, tuple]:
+        """Pose (position, quaternion) of body ``obj`` in the cup link's frame."""
+        cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
+                                           physicsClientId=self.client)[:2]
         obj_pos, obj_orn = pb.getBasePositionAndOrientation(obj, physicsClientId=self.client)
         inv_pos, inv_orn = pb.invertTransform(cup_pos, cup_orn)
-        rel_pos, rel_orn = pb.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+        return pb.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+
+    def grip(self, obj: int) -> None:
+        rel_pos, rel_orn = self._object_in_cup(obj)
         cid = pb.createConstraint(self.uid, self.cup_link, obj, -1, pb.JOINT_FIXED, (0, 0, 0),
                                   rel_pos, (0, 0, 0), rel_orn, (0, 0, 0, 1), physicsClientId=self.client)
         pb.changeConstraint(cid, maxForce=self.motion.suction_force, physicsClientId=self.client)
@@ -291,11 +292,10 @@ class Primitives:
         r.teleport(np.array([out_x, py, z_carry]))
         r.move_linear(np.array([out_x, py, z_carry]), np.array([px, py, z_carry]), m.approach_speed)
         z_release = min(max(hang + m.release_gap, 0.0), z_carry)
-        others = objects - {obj}
 
-        def landed() -> bool:
+        def landed() -> bool:  # the held object touches anything but the tool
             pts = pb.getContactPoints(bodyA=obj, physicsClientId=r.client)
-            return any(p[2] in others or p[2] not in (r.uid,) and p[2] not in objects for p in pts)
+            return any(p[2] != r.uid for p in pts)
 
         r.move_linear(np.array([px, py, z_carry]), np.array([px, py, z_release]), m.vertical_speed,
                       stop=landed)

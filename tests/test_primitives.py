@@ -88,3 +88,13 @@ def test_hindsight_relabelled_transition_when_all_in_wrong_regions(env):
                   [REGIONS[0], REGIONS[1].__class__(0.35, 0.40, -0.09, 0.09), REGIONS[2]])
     _, _, _, _, info = env.step(action_at(env, "push_right", 0.05, -0.25))
     assert "relabelled" not in info
+
+
+def test_set_scene_rejects_bad_input_before_touching_the_scene(env):
+    import pytest
+    before = [o.uid for o in env.world.objects]
+    with pytest.raises(ValueError, match="class must be in"):
+        env.set_scene([(box(), 0, 0.2, 0.0, 0.0), (box(), 3, 0.3, 0.2, 0.0)], REGIONS)
+    with pytest.raises(ValueError, match="regions"):
+        env.set_scene([(box(), 0, 0.2, 0.0, 0.0)], REGIONS[:2])
+    assert [o.uid for o in env.world.objects] == before

@@ -1,6 +1,7 @@
 """Spawning, regions and the definitions behind the reward."""
 
 import numpy as np
+import pybullet as pb
 import pytest
 
 from shelf_env import params
@@ -20,7 +21,6 @@ def test_spawned_objects_never_overlap_rest_inside_and_start_unsorted(object_set
         assert (pos[:, 2] < 0.2).all()  # resting on the floor, not stacked or tumbling
         assert not env.world.in_own_region(pos).all() and info["num_unsorted_initial"] >= 1
         # footprints from the simulator: no two objects' AABBs interpenetrate
-        import pybullet as pb
         boxes = [pb.getAABB(o.uid, physicsClientId=env.client) for o in env.world.objects]
         for i in range(n):
             for j in range(i + 1, n):
