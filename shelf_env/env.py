@@ -109,6 +109,7 @@ class ShelfSortEnv(gym.Env):
         self._obs: np.ndarray | None = None
         self.action_count = 0
         self.num_unsorted_initial = 0
+        self.episode_num_objects = 0
 
     # ---- configuration ----------------------------------------------------------------
     def _check_num_objects(self, n) -> int:
@@ -145,6 +146,8 @@ class ShelfSortEnv(gym.Env):
         """Counters, masks and first observation of a freshly built scene (reset, set_scene)."""
         self._regions_mask = region_masks(self.world.regions, self.rows, self.cols, self.camera.pixel_size)
         self.action_count = 0
+        # N of this episode: set_num_objects during an episode only affects the next reset
+        self.episode_num_objects = len(self.world.objects)
         region = self.world.region_of(self.world.positions())
         self.num_unsorted_initial = int((region != self.world.classes()).sum())
         self._obs = self._observe()
@@ -196,7 +199,6 @@ class ShelfSortEnv(gym.Env):
         for spec, cls, x, y, yaw in objects:
             self._add_object(spec, int(cls), x, y, yaw)
         self.world.settle()
-        self.num_objects = len(objects)
         return self._begin_episode()
 
     def _class_of_uid(self, classes: np.ndarray | None = None) -> dict[int, int]:
@@ -267,6 +269,31 @@ class ShelfSortEnv(gym.Env):
             }
         return self._obs.copy(), float(reward), bool(terminated), bool(truncated), info
 
+    def exploration_mask(self) -> np.ndarray:
+        """Actions worth exploring in the current observation, a bool array of ``action_space.n``.
+
+        For `sb3_pixeldqn.PixelDoubleDQN(exploration_mask="exploration_mask")`: picks on a visible
+        object cell, and pushes whose blade (one row either side of the start cell) meets a visible
+        object cell within the push length in the push direction. Uniform pixels would mostly pick
+        or push empty space (an object covers ~1 % of the map). Uses only the observation.
+        """
+        if self._semantic is None:
+            raise RuntimeError("call reset() before exploration_mask()")
+        occupied = self._semantic[0] >= 0
+        band = occupied.copy()  # the blade is ~1 cm (2 cells) deep: count neighbouring rows
+        band[1:] |= occupied[:-1]
+        band[:-1] |= occupied[1:]
+        reach = int(round(params.PUSH_LENGTH / self.camera.pixel_size))
+        counts = np.concatenate([np.zeros((self.rows, 1), dtype=np.int64), np.cumsum(band, axis=1)], axis=1)
+        cols = np.arange(self.cols)
+        masks = {
+            "pick": occupied,
+            # push-left moves towards col 0: objects in cols [c - reach, c]
+            "push_left": (counts[:, cols + 1] - counts[:, np.maximum(cols - reach, 0)]) > 0,
+            "push_right": (counts[:, np.minimum(cols + reach, self.cols - 1) + 1] - counts[:, cols]) > 0,
+        }
+        return np.concatenate([masks[name].reshape(-1) for name in self.map_names])
+
     def _place_for(self, uid: int) -> tuple[float, float]:
         obj = next(o for o in self.world.objects if o.uid == uid)
         cell_uid, _ = self._semantic
@@ -285,8 +312,8 @@ class ShelfSortEnv(gym.Env):
         in_own = region == self.world.classes()
         n_sorted = int(in_own.sum())
         return {
-            "is_success": bool(not fell and len(in_own) == self.num_objects and in_own.all() and resting.all()),
-            "num_objects": self.num_objects,
+            "is_success": bool(not fell and len(in_own) == self.episode_num_objects and in_own.all() and resting.all()),
+            "num_objects": self.episode_num_objects,
             "num_sorted": n_sorted,
             "num_unsorted_initial": self.num_unsorted_initial,
             "fell": fell,

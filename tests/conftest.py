@@ -1,9 +1,14 @@
 import gymnasium as gym
 import pytest
+import torch as th
 
 import shelf_env  # noqa: F401
 from shelf_env.objects import ObjectSpec
 from shelf_env.world import Region
+
+# The test networks are tiny; one thread is as fast, and several OpenMP threads spin badly when
+# another process (a training run, a parallel job) shares the two cores.
+th.set_num_threads(1)
 
 # Three side-by-side regions spanning the full depth: left (+y) green, middle yellow, right blue.
 REGIONS = [Region(0.0, 0.40, 0.12, 0.30), Region(0.0, 0.40, -0.09, 0.09), Region(0.0, 0.40, -0.30, -0.12)]

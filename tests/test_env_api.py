@@ -9,6 +9,7 @@ import pytest
 from stable_baselines3.common.env_checker import check_env
 
 from shelf_env.env import ShelfSortEnv, map_names
+from tests.conftest import REGIONS, box
 
 
 def test_check_env_passes_without_warnings():
@@ -126,3 +127,29 @@ def test_resets_keep_body_count_constant():
 @pytest.mark.slow
 def test_thousand_resets_keep_body_count_constant():
     _body_count_stays_constant(1000)
+
+
+def test_exploration_mask_marks_object_cells_and_pushes_that_reach_them(env):
+    env.set_scene([(box(0.06, 0.06, 0.08), 0, 0.25, 0.0, 0.0)], REGIONS)
+    mask = env.exploration_mask().reshape(3, env.rows, env.cols)
+    assert mask.dtype == bool and mask.size == env.action_space.n
+    seen = env._semantic[0] >= 0
+    assert np.array_equal(mask[0], seen)
+    rows, cols = np.nonzero(seen)
+    r = int(np.median(rows))
+    left_edge, right_edge = cols.min(), cols.max()
+    reach = round(0.08 / env.camera.pixel_size)
+    # push-left moves towards col 0: it meets the object if it starts right of it within reach
+    assert mask[1, r, right_edge + reach] and not mask[1, r, right_edge + reach + 1]
+    assert mask[2, r, left_edge - reach] and not mask[2, r, left_edge - reach - 1]
+    assert not mask[1, r, left_edge - 1] and not mask[2, r, right_edge + 1]
+    assert not mask[:, : rows.min() - 2].any()
+
+
+def test_set_num_objects_mid_episode_keeps_the_episode_n(env):
+    env.reset(seed=1, options={"num_objects": 2})
+    env.set_num_objects(5)
+    obs, reward, terminated, truncated, info = env.step(0)
+    assert info["num_objects"] == 2
+    env.reset(seed=2)
+    assert len(env.world.objects) == 5

@@ -1,0 +1,19 @@
+"""sb3_pixeldqn: pixel-wise double deep Q-learning for Stable-Baselines3 (env-agnostic).
+
+``PixelDoubleDQN("FCNPolicy", env).learn(...)`` trains fully convolutional Q-maps on any env with a
+``Box(0, 255, (C, H, W), uint8)`` observation and a ``Discrete(n_maps * H * W)`` action space.
+"""
+
+from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer
+from sb3_pixeldqn.callbacks import CurriculumCallback
+from sb3_pixeldqn.pixel_dqn import PixelDoubleDQN
+from sb3_pixeldqn.policies import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, FCNPolicy
+
+__all__ = [
+    "PICK_AND_PUSH_MAPS",
+    "PICK_ONLY_MAPS",
+    "CurriculumCallback",
+    "FCNPolicy",
+    "HindsightRelabelReplayBuffer",
+    "PixelDoubleDQN",
+]

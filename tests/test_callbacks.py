@@ -1,0 +1,97 @@
+"""CurriculumCallback: stage changes, ε restarts, several envs, resume after save/load; TensorBoard tags."""
+
+import glob
+
+import pytest
+from pixel_envs import CoinEnv
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.env_util import make_vec_env
+
+from sb3_pixeldqn import CurriculumCallback, PixelDoubleDQN
+
+KW = dict(policy_kwargs=dict(maps=[("pick", 0)], widths=(4, 8, 8)), learning_starts=10**6, buffer_size=100,
+          exploration_timesteps=100, seed=0)
+
+
+class Recorder(BaseCallback):
+    """Records (timestep, episode N, ε) at every episode end."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.episodes: list[tuple[int, int, float]] = []
+
+    def _on_step(self) -> bool:
+        for done, info in zip(self.locals["dones"], self.locals["infos"]):
+            if done:
+                self.episodes.append((self.num_timesteps, info["num_objects"], self.model.exploration_rate))
+        return True
+
+
+def test_advances_after_window_of_successes_and_restarts_epsilon():
+    model = PixelDoubleDQN("FCNPolicy", CoinEnv(p_success=1.0), **KW)
+    curriculum, rec = CurriculumCallback(window=5, max_value=3), Recorder()
+    model.learn(30, callback=CallbackList([curriculum, rec]))
+    ns = [n for _, n, _ in rec.episodes]
+    # 5 successes at N=1, then the first N=2 episode, 1 stale one at the old N, 5 counted at N=2, ...
+    assert ns[:5] == [1] * 5 and ns[5] == 1 and ns[6:11] == [2] * 5 and ns[11] == 2 and ns[12] == 3
+    assert curriculum.value == 3 == model.curriculum_state["value"]  # capped at max_value
+    assert [n for _, n in curriculum.history] == [1, 2, 3]
+    # ε restarts at each stage change (the 5th success of a stage resets it to 0.8 before the next ε update)
+    eps_at_change = [e for t, n, e in rec.episodes if t in (curriculum.history[1][0], curriculum.history[2][0])]
+    assert all(e == pytest.approx(0.8) for e in eps_at_change)
+    assert model.stage_timesteps < 30
+
+
+def test_does_not_advance_below_threshold():
+    model = PixelDoubleDQN("FCNPolicy", CoinEnv(p_success=0.5), **KW)
+    curriculum = CurriculumCallback(window=10, threshold=0.9)
+    model.learn(60, callback=curriculum)
+    assert curriculum.value == 1 and model.stage_timesteps == 60
+
+
+def test_several_envs_all_get_the_new_n():
+    env = make_vec_env(lambda: CoinEnv(p_success=1.0), n_envs=3)
+    model = PixelDoubleDQN("FCNPolicy", env, **KW)
+    curriculum, rec = CurriculumCallback(window=6, max_value=4), Recorder()
+    model.learn(60, callback=CallbackList([curriculum, rec]))
+    assert curriculum.value == 4
+    assert env.get_attr("num_objects") == [4, 4, 4]
+    first_n4 = min(t for t, n, _ in rec.episodes if n == 4)
+    assert first_n4 > curriculum.history[-1][0]
+
+
+def test_resumes_at_stage_and_epsilon_after_save_load(tmp_path):
+    model = PixelDoubleDQN("FCNPolicy", CoinEnv(p_success=1.0), **KW)
+    model.learn(14, callback=CurriculumCallback(window=5, max_value=8))
+    stage, eps, stage_steps = model.curriculum_state["value"], model.exploration_rate, model.stage_timesteps
+    assert stage == 3
+    model.save(tmp_path / "m.zip")
+
+    loaded = PixelDoubleDQN.load(tmp_path / "m.zip", env=CoinEnv(p_success=0.0))
+    assert loaded.curriculum_state["value"] == 3 and loaded.exploration_rate == pytest.approx(eps)
+    rec = Recorder()
+    loaded.learn(4, callback=CallbackList([CurriculumCallback(window=5, max_value=8), rec]), reset_num_timesteps=False)
+    assert [n for _, n, _ in rec.episodes] == [3, 3, 3, 3]  # first episode already at the saved stage
+    assert loaded.stage_timesteps == stage_steps + 4
+    assert loaded.num_timesteps == 18
+
+
+def test_tensorboard_gets_the_promised_scalars(tmp_path):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    model = PixelDoubleDQN("FCNPolicy", CoinEnv(p_success=1.0), tensorboard_log=str(tmp_path),
+                           **{**KW, "learning_starts": 5})
+    model.learn(40, callback=CurriculumCallback(window=5), log_interval=2)
+    (run,) = glob.glob(str(tmp_path / "PixelDoubleDQN_*"))
+    events = EventAccumulator(run)
+    events.Reload()
+    tags = set(events.Tags()["scalars"])
+    assert {"train/loss", "rollout/success_rate", "rollout/exploration_rate", "curriculum/num_objects"} <= tags
+    assert max(e.value for e in events.Scalars("curriculum/num_objects")) >= 2
+
+
+def test_bad_curriculum_arguments():
+    with pytest.raises(ValueError):
+        CurriculumCallback(start_value=5, max_value=3)
+    with pytest.raises(ValueError):
+        CurriculumCallback(threshold=1.5)
