@@ -1,0 +1,83 @@
+"""Plot a training run's success curve and curriculum stage from its ``episodes.csv``.
+
+    python examples/plot_training.py runs/curriculum --png docs/training_curve.png
+
+Top: success rate over the last 50 training episodes (ε-greedy, as the curriculum sees it)
+against env steps, with the number of objects N on the right axis. Bottom: N against wall-clock
+minutes. Also prints one line per curriculum stage (first step, minute, episodes, success).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import pathlib
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def read_episodes(path: pathlib.Path) -> dict[str, np.ndarray]:
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        raise ValueError(f"{path} has no episodes yet")
+    return {key: np.array([float(r[key]) for r in rows]) for key in rows[0]}
+
+
+def rolling_mean(x: np.ndarray, window: int) -> np.ndarray:
+    c = np.cumsum(np.insert(x, 0, 0.0))
+    n = np.minimum(np.arange(1, len(x) + 1), window)
+    return (c[1:] - c[np.arange(1, len(x) + 1) - n]) / n
+
+
+def stage_summary(ep: dict[str, np.ndarray]) -> list[str]:
+    lines = []
+    for n in np.unique(ep["num_objects"]).astype(int):
+        sel = ep["num_objects"] == n
+        lines.append(
+            f"N={n}: from step {int(ep['timestep'][sel][0])} ({ep['wall_seconds'][sel][0] / 60:.1f} min), "
+            f"{int(sel.sum())} episodes, success {100 * ep['success'][sel].mean():.0f} %, "
+            f"mean actions {ep['actions'][sel].mean():.1f}"
+        )
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("run", type=pathlib.Path, help="the --out folder of examples/train.py")
+    parser.add_argument("--png", type=pathlib.Path, default=None, help="default: <run>/training_curve.png")
+    parser.add_argument("--window", type=int, default=50)
+    args = parser.parse_args()
+    ep = read_episodes(args.run / "episodes.csv")
+    png = args.png or args.run / "training_curve.png"
+
+    fig, (ax1, ax3) = plt.subplots(2, 1, figsize=(8, 6), height_ratios=[2, 1])
+    ax1.plot(ep["timestep"], 100 * rolling_mean(ep["success"], args.window), color="tab:green",
+             label=f"success, last {args.window} episodes")
+    ax1.axhline(90, color="grey", lw=0.8, ls="--", label="curriculum threshold (90 %)")
+    ax1.set_xlabel("env steps")
+    ax1.set_ylabel("success rate (%)")
+    ax1.set_ylim(0, 102)
+    ax2 = ax1.twinx()
+    ax2.step(ep["timestep"], ep["num_objects"], where="post", color="tab:blue", label="N")
+    ax2.set_ylabel("objects N", color="tab:blue")
+    ax2.set_ylim(0, max(ep["num_objects"]) + 1)
+    ax1.legend(loc="lower left", fontsize=8)
+    ax3.step(ep["wall_seconds"] / 60, ep["num_objects"], where="post", color="tab:blue")
+    ax3.set_xlabel("wall-clock minutes")
+    ax3.set_ylabel("objects N")
+    ax3.set_ylim(0, max(ep["num_objects"]) + 1)
+    fig.suptitle("PixelDoubleDQN (P+S) curriculum on ShelfSort-v0, CPU")
+    fig.tight_layout()
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=110)
+    print("\n".join(stage_summary(ep)))
+    print(f"wrote {png}")
+
+
+if __name__ == "__main__":
+    main()
