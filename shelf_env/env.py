@@ -295,12 +295,21 @@ class ShelfSortEnv(gym.Env):
         return np.concatenate([masks[name].reshape(-1) for name in self.map_names])
 
     def _place_for(self, uid: int) -> tuple[float, float]:
+        """Tool (x, y) that puts the held object's centre where the place heuristic wants it.
+
+        The heuristic chooses where the object's footprint goes; the cup may hold the object off
+        centre (it grips where the pick pixel was), so the tool target is shifted by the object's
+        offset from the tool. Without the shift an object gripped near its edge could be carried
+        into a side wall and left outside the cabinet.
+        """
         obj = next(o for o in self.world.objects if o.uid == uid)
         cell_uid, _ = self._semantic
-        aabb_min, aabb_max = pb.getAABB(uid, physicsClientId=self.client)
+        aabb_min, aabb_max = (np.asarray(v) for v in pb.getAABB(uid, physicsClientId=self.client))
         footprint = (aabb_max[0] - aabb_min[0], aabb_max[1] - aabb_min[1])
-        return self._clip_target(*place_position(cell_uid, self._class_of_uid(), self._regions_mask[obj.cls],
-                                                 obj.cls, footprint, self.camera.pixel_size, ignore_uid=uid))
+        centre_x, centre_y = place_position(cell_uid, self._class_of_uid(), self._regions_mask[obj.cls],
+                                            obj.cls, footprint, self.camera.pixel_size, ignore_uid=uid)
+        offset = (aabb_min[:2] + aabb_max[:2]) / 2 - self.robot.tcp_position()[:2]
+        return self._clip_target(centre_x - offset[0], centre_y - offset[1])
 
     @staticmethod
     def _clip_target(x: float, y: float) -> tuple[float, float]:

@@ -50,7 +50,8 @@ class MotionConfig:
     outside_x: float = -0.06  # TCP x of the pre-approach pose in front of the opening
     waypoint_spacing: float = 0.01
     pick_clearance: float = 0.015  # approach height above the observed surface
-    lift: float = 0.015  # lift after gripping
+    lift: float = 0.015  # lift after releasing
+    lift_speed: float = 0.10  # vertical speed of the carry lift and of the descent to the place pose
     ceiling_clearance: float = 0.005
     release_gap: float = 0.004  # held object's bottom above the floor when released
     suction_force: float = 60.0
@@ -276,9 +277,11 @@ class Primitives:
         obj = touched[0]
         r.grip(obj)
         here = self._commanded_tcp()
-        z_carry = min(here[2] + m.lift, z_max)
+        # carry as high as the ceiling allows: a held object dragged low through the clutter in
+        # front is what pushes other objects out of the opening (the paper's main failure, §V-d)
+        z_carry = max(z_max, here[2])
         lifted = np.array([x, y, z_carry])
-        r.move_linear(here, lifted, m.vertical_speed)
+        r.move_linear(here, lifted, m.lift_speed)
         # retreat until the held object is out of the opening (it hangs under the cup, so
         # only the part ahead of the TCP matters); bounded to stay within the arm's reach
         ahead = pb.getAABB(obj, physicsClientId=r.client)[1][0] - self._commanded_tcp()[0]
@@ -297,7 +300,7 @@ class Primitives:
             pts = pb.getContactPoints(bodyA=obj, physicsClientId=r.client)
             return any(p[2] != r.uid for p in pts)
 
-        r.move_linear(np.array([px, py, z_carry]), np.array([px, py, z_release]), m.vertical_speed,
+        r.move_linear(np.array([px, py, z_carry]), np.array([px, py, z_release]), m.lift_speed,
                       stop=landed)
         r.release()
         r.hold_still(12)
