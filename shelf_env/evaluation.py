@@ -1,0 +1,247 @@
+"""The evaluation protocol of §V: SR, AE and mAE per number of objects N, over runs and seeds.
+
+A *cell* is one (policy, object set, N, seed) with ``runs`` episodes. Episode ``run`` of seed
+``seed`` at N objects always starts from the scene of `scene_seed(seed, N, run)`, whatever the
+policy or action layout, so every policy is compared on identical initial arrangements.
+
+Per seed: SR = % of runs sorted in fewer than ``max_actions`` (40) actions; over successful runs
+only, AE = N / actions and mAE = (objects unsorted at the start) / actions. Per N: mean and
+standard deviation of the per-seed values over seeds (Fig. 10).
+
+Policies are named by a string: ``"h-d"``, ``"h-a"``, ``"random"`` or the path of a
+`PixelDoubleDQN` zip (P+S or S; the env layout follows the checkpoint). `check_policy` validates a
+name before any work starts.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import pathlib
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from shelf_env import params
+from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
+
+HEURISTICS = {"h-d": DistanceHeuristic, "h-a": AccessibilityHeuristic}
+NAMED_POLICIES = (*HEURISTICS, "random")
+N_RANGE = (3, 14)
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """What one evaluation episode produced."""
+
+    policy: str
+    object_set: str
+    num_objects: int
+    seed: int
+    run: int
+    success: bool
+    actions: int
+    num_unsorted_initial: int
+    fell: bool
+
+
+def scene_seed(seed: int, num_objects: int, run: int) -> int:
+    """Reset seed of run ``run`` at N = ``num_objects`` for evaluation seed ``seed`` (policy-independent)."""
+    return int(np.random.SeedSequence([seed, num_objects, run]).generate_state(1)[0])
+
+
+def policy_label(policy: str) -> str:
+    """Short name used in files and plots: the name itself, or a checkpoint's file stem."""
+    return policy if policy in NAMED_POLICIES else pathlib.Path(policy).stem
+
+
+def checkpoint_primitives(path: str | os.PathLike) -> tuple[str, ...]:
+    """The env primitives a PixelDoubleDQN checkpoint was trained with (from its map layout)."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise ValueError(f"policy {str(path)!r} is neither one of {NAMED_POLICIES} nor an existing checkpoint file")
+    try:
+        data, _, _ = load_from_zip_file(path, load_data=True, device="cpu")
+    except Exception as err:  # noqa: BLE001  (any failure to read is a bad checkpoint)
+        raise ValueError(f"{path} is not a readable PixelDoubleDQN checkpoint: {err}") from err
+    maps = (data or {}).get("policy_kwargs", {}).get("maps")
+    names = {name for name, _ in maps} if maps else {"pick", "push"}
+    return ("pick", "push") if "push" in names else ("pick",)
+
+
+def check_policy(policy: str, primitives: tuple[str, ...] | None = None) -> tuple[str, ...]:
+    """Validate a policy name (and a forced layout) before work starts; returns the env primitives."""
+    if policy in NAMED_POLICIES:
+        return primitives or ("pick", "push")
+    needed = checkpoint_primitives(policy)
+    if primitives is not None and tuple(primitives) != needed:
+        raise ValueError(
+            f"checkpoint {policy} was trained with primitives {needed} but the evaluation env has {tuple(primitives)}"
+        )
+    return needed
+
+
+def check_ns(ns: list[int], max_objects: int = params.MAX_OBJECTS) -> list[int]:
+    bad = [n for n in ns if not 1 <= n <= max_objects]
+    if bad:
+        raise ValueError(f"N must be in 1..{max_objects} for ShelfSort-v0; got {bad}")
+    return sorted(set(int(n) for n in ns))
+
+
+def make_policy(policy: str, env: gym.Env, seed: int = 0) -> Any:
+    """An object with SB3's ``predict`` for ``policy`` acting in ``env``."""
+    if policy in HEURISTICS:
+        return HEURISTICS[policy](env)
+    if policy == "random":
+        return RandomPolicy(env, seed=seed)
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    return PixelDoubleDQN.load(policy, env=env, device="cpu")
+
+
+def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = params.MAX_ACTIONS) -> dict:
+    """Roll out ``policy`` greedily from the scene of ``reset_seed``; success needs < ``max_actions`` actions."""
+    obs, info = env.reset(seed=reset_seed)
+    unsorted = info["num_unsorted_initial"]
+    while True:
+        action, _ = policy.predict(obs, deterministic=True)
+        obs, _, terminated, truncated, info = env.step(int(np.asarray(action).reshape(-1)[0]))
+        if terminated or truncated:
+            break
+    actions = info["action_count"]
+    return {"success": bool(info["is_success"]) and actions < max_actions, "actions": int(actions),
+            "num_unsorted_initial": int(unsorted), "fell": bool(info["fell"])}
+
+
+def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_set: str = "ycb",
+                  primitives: tuple[str, ...] | None = None) -> list[EpisodeRecord]:
+    """All ``runs`` episodes of one (policy, N, seed) cell."""
+    primitives = check_policy(policy, primitives)
+    env = gym.make("ShelfSort-v0", num_objects=num_objects, object_set=object_set, primitives=primitives,
+                   max_actions=params.MAX_ACTIONS)
+    try:
+        agent = make_policy(policy, env, seed=scene_seed(seed, num_objects, 10**6))  # its own stream
+        return [
+            EpisodeRecord(policy_label(policy), object_set, num_objects, seed, run,
+                          **run_episode(env, agent, scene_seed(seed, num_objects, run)))
+            for run in range(runs)
+        ]
+    finally:
+        env.close()
+
+
+# ---------------------------------------------------------------- metrics
+def seed_metrics(records: list[EpisodeRecord]) -> dict[str, float]:
+    """SR (%), AE and mAE of one seed's runs (AE, mAE over successful runs; nan if none)."""
+    ok = [r for r in records if r.success]
+    sr = 100.0 * len(ok) / len(records) if records else math.nan
+    ae = float(np.mean([r.num_objects / r.actions for r in ok])) if ok else math.nan
+    mae = float(np.mean([r.num_unsorted_initial / r.actions for r in ok])) if ok else math.nan
+    return {"sr": sr, "ae": ae, "mae": mae}
+
+
+def summarize(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
+    """One row per (policy, object set, N): mean and std over seeds of SR, AE, mAE, and counts."""
+    groups: dict[tuple, dict[int, list[EpisodeRecord]]] = {}
+    for r in records:
+        groups.setdefault((r.policy, r.object_set, r.num_objects), {}).setdefault(r.seed, []).append(r)
+    rows = []
+    for (policy, object_set, n), by_seed in sorted(groups.items()):
+        per_seed = [seed_metrics(rs) for _, rs in sorted(by_seed.items())]
+        row: dict[str, Any] = {"policy": policy, "object_set": object_set, "num_objects": n,
+                               "seeds": len(per_seed), "runs": sum(len(rs) for rs in by_seed.values())}
+        for key in ("sr", "ae", "mae"):
+            values = np.array([m[key] for m in per_seed], dtype=float)
+            finite = values[np.isfinite(values)]
+            row[f"{key}_mean"] = float(finite.mean()) if finite.size else math.nan
+            row[f"{key}_std"] = float(finite.std()) if finite.size else math.nan
+        row["fell_rate"] = float(np.mean([r.fell for rs in by_seed.values() for r in rs]))
+        rows.append(row)
+    return rows
+
+
+# ---------------------------------------------------------------- files
+def write_json_atomic(path: pathlib.Path, data: Any) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.partial")
+    tmp.write_text(json.dumps(data, indent=1, allow_nan=True))
+    os.replace(tmp, path)
+
+
+def cell_path(out: pathlib.Path, policy: str, object_set: str, n: int, seed: int, runs: int) -> pathlib.Path:
+    return out / "cells" / f"{policy_label(policy)}__{object_set}__N{n:02d}__seed{seed}__runs{runs}.json"
+
+
+def save_cell(path: pathlib.Path, records: list[EpisodeRecord]) -> None:
+    write_json_atomic(path, [asdict(r) for r in records])
+
+
+def load_cell(path: pathlib.Path) -> list[EpisodeRecord]:
+    return [EpisodeRecord(**r) for r in json.loads(path.read_text())]
+
+
+def write_results(out: pathlib.Path, records: list[EpisodeRecord], config: dict[str, Any]) -> list[dict[str, Any]]:
+    """``results.csv`` (the summary) and ``results.json`` (configuration, summary, per-seed metrics)."""
+    rows = summarize(records)
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / ".results.csv.partial"
+    with open(tmp, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in row.items()})
+    os.replace(tmp, out / "results.csv")
+    per_seed = {}
+    for r in records:
+        per_seed.setdefault(f"{r.policy}|{r.object_set}|{r.num_objects}|{r.seed}", []).append(r)
+    write_json_atomic(out / "results.json", {
+        "config": config,
+        "summary": rows,
+        "per_seed": {k: seed_metrics(v) for k, v in sorted(per_seed.items())},
+    })
+    return rows
+
+
+# ---------------------------------------------------------------- plots
+def plot_metrics(rows: list[dict[str, Any]], png: pathlib.Path, object_set: str | None = None,
+                 title: str = "") -> None:
+    """Fig. 10: SR, AE, mAE against N, one line per policy with a ±1 std band over seeds.
+
+    With ``object_set=None`` and rows for several object sets, lines are per (policy, set) — Fig. 12.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sel = [r for r in rows if object_set is None or r["object_set"] == object_set]
+    sets = sorted({r["object_set"] for r in sel})
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+    for policy in sorted({r["policy"] for r in sel}):
+        for oset in sets:
+            line = sorted((r for r in sel if r["policy"] == policy and r["object_set"] == oset),
+                          key=lambda r: r["num_objects"])
+            if not line:
+                continue
+            label = policy if len(sets) == 1 else f"{policy} ({oset})"
+            ns = np.array([r["num_objects"] for r in line])
+            for ax, key, name in zip(axes, ("sr", "ae", "mae"), ("SR (%)", "AE", "mAE")):
+                mean = np.array([r[f"{key}_mean"] for r in line], dtype=float)
+                std = np.array([r[f"{key}_std"] for r in line], dtype=float)
+                (handle,) = ax.plot(ns, mean, marker="o", ms=3, label=label)
+                ax.fill_between(ns, mean - std, mean + std, color=handle.get_color(), alpha=0.2)
+                ax.set_xlabel("number of objects N")
+                ax.set_ylabel(name)
+    axes[0].set_ylim(-2, 102)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=110)
+    plt.close(fig)

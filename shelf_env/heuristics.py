@@ -1,0 +1,190 @@
+"""The heuristic baselines H-d and H-a of §V-a, and a random-policy floor.
+
+All of them act only through pick-and-place, choose only the pick pixel (the env's place
+heuristic chooses where the object goes, exactly as for the learned policies) and see only the
+observation — the recoloured heightmap — so they face the same partial observability as the
+learned policy. They expose SB3's ``predict(obs, state, episode_start, deterministic)`` so that
+one evaluation loop runs every policy.
+
+What they read from the observation (`ObservationView`): the class of each visible object cell
+(its colour), each class's target region (the bounding box of its visible tint — regions are
+rectangles, and objects standing in a region hide part of its tint) and the cells a suction cup
+can grip (object cells at least a cup radius inside the visible blob of their class, so that the
+cup does not land on an edge).
+
+- **H-d**: among graspable cells, the one farthest from its class's region (§V-a: "evaluates each
+  pixel's distance from the target region and selects the pixel with the largest distance").
+- **H-a**: among graspable cells not yet in their region, the one with the largest
+  distance-from-region plus distance-from-the-back: objects in front are more accessible and
+  hide others. When every visible object sits in its region, it picks the frontmost object, to
+  reveal what it hides.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+
+from shelf_env.camera import CLASS_RGB, REGION_RGB
+from shelf_env.env import ShelfSortEnv
+
+#: Cup radius in cells at the default 5 mm (13 mm cup): graspable cells are this far inside a blob.
+CUP_MARGIN_M = 0.013
+
+
+@dataclass
+class ObservationView:
+    """What a heuristic reads from one observation ``(4, H, W)``."""
+
+    object_class: np.ndarray  # (H, W) int: class of the visible object cell, -1 elsewhere
+    regions: list[tuple[int, int, int, int] | None]  # per class (row0, row1, col0, col1), inclusive
+    graspable: np.ndarray  # (H, W) bool: object cells a cup radius inside their class blob
+
+    @classmethod
+    def from_observation(cls, obs: np.ndarray, margin_cells: int) -> ObservationView:
+        rgb = np.moveaxis(obs[:3], 0, -1)
+        object_class = np.full(obs.shape[1:], -1, dtype=np.int64)
+        for k, colour in enumerate(CLASS_RGB):
+            object_class[(rgb == colour).all(axis=-1)] = k
+        regions: list[tuple[int, int, int, int] | None] = []
+        for colour in REGION_RGB:
+            rows, cols = np.nonzero((rgb == colour).all(axis=-1))
+            regions.append((rows.min(), rows.max(), cols.min(), cols.max()) if rows.size else None)
+        graspable = np.zeros_like(object_class, dtype=bool)
+        for k in range(len(CLASS_RGB)):
+            blob = object_class == k
+            inner = _erode(blob, margin_cells)
+            graspable |= inner if inner.any() else blob
+        return cls(object_class, regions, graspable)
+
+    def distance_to_region(self) -> np.ndarray:
+        """(H, W) distance in cells from each object cell to its class's region rectangle (0 inside).
+
+        A class whose region is not visible at all gets the largest distance of the map, so its
+        objects are not mistaken for sorted ones.
+        """
+        h, w = self.object_class.shape
+        rows, cols = np.mgrid[0:h, 0:w]
+        dist = np.zeros((h, w))
+        for k, rect in enumerate(self.regions):
+            cells = self.object_class == k
+            if rect is None:
+                dist[cells] = float(np.hypot(h, w))
+                continue
+            r0, r1, c0, c1 = rect
+            dr = np.maximum(np.maximum(r0 - rows, rows - r1), 0)
+            dc = np.maximum(np.maximum(c0 - cols, cols - c1), 0)
+            dist[cells] = np.hypot(dr, dc)[cells]
+        return dist
+
+
+def _erode(mask: np.ndarray, radius: int) -> np.ndarray:
+    """Cells of ``mask`` whose whole (2r+1) x (2r+1) neighbourhood is in ``mask``."""
+    if radius <= 0:
+        return mask.copy()
+    padded = np.pad(mask, radius, constant_values=False)
+    out = np.ones_like(mask)
+    h, w = mask.shape
+    for dr in range(2 * radius + 1):
+        for dc in range(2 * radius + 1):
+            out &= padded[dr:dr + h, dc:dc + w]
+    return out
+
+
+class PickHeuristic:
+    """Shared plumbing: the env's layout, batching and SB3's ``predict`` signature."""
+
+    def __init__(self, env: gym.Env) -> None:
+        base = env.unwrapped
+        if not isinstance(base, ShelfSortEnv):
+            raise ValueError(f"{type(self).__name__} needs a ShelfSort-v0 env, got {type(base).__name__}")
+        if "pick" not in base.map_names:
+            raise ValueError(f"{type(self).__name__} needs the pick primitive; the env has {base.map_names}")
+        self.observation_space = base.observation_space
+        self.action_space = base.action_space
+        self.pick_map = base.map_names.index("pick")
+        self.rows, self.cols = base.rows, base.cols
+        self.pixel_size = base.camera.pixel_size
+        self.margin_cells = int(round(CUP_MARGIN_M / self.pixel_size))
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: tuple | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, None]:
+        obs = np.asarray(observation)
+        shape = self.observation_space.shape
+        if obs.shape == shape:
+            return np.array(self._act(obs)), None
+        if obs.ndim == 4 and obs.shape[1:] == shape:
+            return np.array([self._act(o) for o in obs]), None
+        raise ValueError(f"{type(self).__name__}: observation shape {obs.shape} is not {shape} or (n, *{shape})")
+
+    def _pick(self, row: int, col: int) -> int:
+        return self.pick_map * self.rows * self.cols + int(row) * self.cols + int(col)
+
+    def _act(self, obs: np.ndarray) -> int:
+        view = ObservationView.from_observation(obs, self.margin_cells)
+        if not view.graspable.any():  # nothing visible: pick the middle of the floor (a no-op probe)
+            return self._pick(self.rows // 2, self.cols // 2)
+        row, col = self.choose(view)
+        return self._pick(row, col)
+
+    def choose(self, view: ObservationView) -> tuple[int, int]:
+        raise NotImplementedError
+
+
+class DistanceHeuristic(PickHeuristic):
+    """H-d: pick the graspable cell farthest from its class's target region (front-most on ties)."""
+
+    def choose(self, view: ObservationView) -> tuple[int, int]:
+        dist = np.where(view.graspable, view.distance_to_region(), -1.0)
+        rows, cols = np.nonzero(dist == dist.max())
+        i = int(np.argmax(rows))  # ties: the front-most cell
+        return int(rows[i]), int(cols[i])
+
+
+class AccessibilityHeuristic(PickHeuristic):
+    """H-a: among misplaced graspable cells, maximise distance-from-region + ``front_weight`` x
+    distance-from-the-back (both in cells); if none is misplaced, pick the front-most object."""
+
+    def __init__(self, env: gym.Env, front_weight: float = 1.0) -> None:
+        super().__init__(env)
+        self.front_weight = front_weight
+
+    def choose(self, view: ObservationView) -> tuple[int, int]:
+        dist = view.distance_to_region()
+        misplaced = view.graspable & (dist > 0)
+        rows = np.arange(self.rows)[:, None] * np.ones((1, self.cols))  # row index = distance from the back
+        if misplaced.any():
+            score = np.where(misplaced, dist + self.front_weight * rows, -np.inf)
+        else:
+            score = np.where(view.graspable, rows, -np.inf)
+        row, col = np.unravel_index(int(np.argmax(score)), score.shape)
+        return int(row), int(col)
+
+
+class RandomPolicy:
+    """Uniform over all actions of the env's layout: the floor every policy must beat."""
+
+    def __init__(self, env: gym.Env, seed: int | None = None) -> None:
+        self.action_space = env.action_space
+        self.observation_space = env.observation_space
+        self.rng = np.random.default_rng(seed)
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: tuple | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, None]:
+        obs = np.asarray(observation)
+        n = int(self.action_space.n)
+        if obs.shape == self.observation_space.shape:
+            return np.array(self.rng.integers(n)), None
+        return self.rng.integers(n, size=obs.shape[0]), None

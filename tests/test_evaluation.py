@@ -1,0 +1,99 @@
+"""The §V protocol: metrics on hand-made records, identical scenes, bad input, the CLI's resume."""
+
+import json
+import math
+import pathlib
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from pixel_envs import FindTheSquareEnv
+
+from sb3_pixeldqn import PixelDoubleDQN
+from shelf_env import evaluation as ev
+from shelf_env.evaluation import EpisodeRecord
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "examples"))
+import evaluate as evaluate_cli  # noqa: E402
+
+
+def rec(seed, run, success, actions, unsorted=3, n=3, policy="h-d"):
+    return EpisodeRecord(policy, "ycb", n, seed, run, success, actions, unsorted, False)
+
+
+def test_metrics_on_hand_made_records():
+    seed0 = [rec(0, 0, True, 3, 3), rec(0, 1, True, 4, 2), rec(0, 2, True, 6, 3), rec(0, 3, False, 40)]
+    seed1 = [rec(1, 0, True, 3, 1), rec(1, 1, False, 40), rec(1, 2, False, 7), rec(1, 3, True, 6, 3)]
+    m0 = ev.seed_metrics(seed0)
+    assert m0["sr"] == 75.0
+    assert m0["ae"] == pytest.approx((3 / 3 + 3 / 4 + 3 / 6) / 3)
+    assert m0["mae"] == pytest.approx((3 / 3 + 2 / 4 + 3 / 6) / 3)
+    m1 = ev.seed_metrics(seed1)
+    assert m1 == {"sr": 50.0, "ae": pytest.approx((1 + 0.5) / 2), "mae": pytest.approx((1 / 3 + 3 / 6) / 2)}
+    (row,) = ev.summarize(seed0 + seed1)
+    assert row["sr_mean"] == pytest.approx(62.5) and row["sr_std"] == pytest.approx(12.5)
+    assert row["ae_mean"] == pytest.approx((m0["ae"] + m1["ae"]) / 2)
+    assert row["ae_std"] == pytest.approx(abs(m0["ae"] - m1["ae"]) / 2)
+    assert row["seeds"] == 2 and row["runs"] == 8
+    # no success at all: SR 0, AE and mAE undefined
+    (none,) = ev.summarize([rec(0, 0, False, 40), rec(1, 0, False, 12)])
+    assert none["sr_mean"] == 0.0 and math.isnan(none["ae_mean"]) and math.isnan(none["mae_mean"])
+
+
+def test_success_needs_fewer_than_max_actions():
+    env = gym.make("ShelfSort-v0", num_objects=1, max_actions=40)
+    policy = ev.make_policy("h-d", env)
+    out = ev.run_episode(env, policy, ev.scene_seed(0, 1, 0))
+    assert out["success"] == (out["actions"] < 40) and out["success"]
+    env.close()
+
+
+def test_same_scenes_for_every_policy_and_layout():
+    layouts = [gym.make("ShelfSort-v0", num_objects=5, object_set="ycb", primitives=p).unwrapped
+               for p in (("pick", "push"), ("pick",))]
+    for run in range(2):
+        seed = ev.scene_seed(1, 5, run)
+        states = []
+        for env in layouts:
+            obs, _ = env.reset(seed=seed)
+            regions = [tuple(vars(r).values()) for r in env.world.regions]
+            states.append((obs, env.world.positions(), env.world.classes(), regions))
+        assert np.array_equal(states[0][0], states[1][0])
+        assert np.allclose(states[0][1], states[1][1]) and np.array_equal(states[0][2], states[1][2])
+        assert states[0][3] == states[1][3]
+    assert ev.scene_seed(1, 5, 0) != ev.scene_seed(1, 5, 1) != ev.scene_seed(0, 5, 1)
+    for env in layouts:
+        env.close()
+
+
+def test_bad_input_is_refused_before_work(tmp_path):
+    with pytest.raises(ValueError, match="neither one of"):
+        ev.check_policy("h-x")
+    with pytest.raises(ValueError, match="N must be in 1..14"):
+        ev.check_ns([3, 15])
+    s_model = PixelDoubleDQN("FCNPolicy", FindTheSquareEnv(),
+                             policy_kwargs=dict(maps=[("pick", 0)], widths=(4, 8, 8)))
+    s_model.save(tmp_path / "s.zip")
+    assert ev.check_policy(str(tmp_path / "s.zip")) == ("pick",)
+    with pytest.raises(ValueError, match=r"trained with primitives \('pick',\)"):
+        ev.check_policy(str(tmp_path / "s.zip"), ("pick", "push"))
+    (tmp_path / "bad.zip").write_bytes(b"nope")
+    with pytest.raises(ValueError, match="not a readable"):
+        ev.check_policy(str(tmp_path / "bad.zip"))
+    with pytest.raises(ValueError):
+        evaluate_cli.main(["--policies", "h-d", "nonexistent.zip", "--out", str(tmp_path / "o"), "--runs", "1"])
+    assert not (tmp_path / "o").exists()
+
+
+def test_cli_writes_results_and_resumes(tmp_path, capsys):
+    argv = ["--policies", "h-a", "--ns", "1", "--runs", "1", "--seeds", "2", "--object-sets", "train",
+            "--out", str(tmp_path), "--workers", "1"]
+    assert evaluate_cli.main(argv) == 0
+    assert "2 to run" in capsys.readouterr().out
+    data = json.loads((tmp_path / "results.json").read_text())
+    assert data["config"]["runs"] == 1 and data["config"]["complete"]
+    assert data["summary"][0]["policy"] == "h-a" and data["summary"][0]["seeds"] == 2
+    assert (tmp_path / "results.csv").exists() and (tmp_path / "sr_ae_mae_train.png").stat().st_size > 10_000
+    assert evaluate_cli.main(argv) == 0
+    assert "2 already on disk, 0 to run" in capsys.readouterr().out

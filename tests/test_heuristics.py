@@ -1,0 +1,91 @@
+"""H-d, H-a and the random floor on crafted observations (no physics needed to decide)."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from pixel_envs import FindTheSquareEnv
+
+import shelf_env  # noqa: F401
+from shelf_env.camera import CLASS_RGB, FREE_RGB, REGION_RGB
+from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
+
+H, W = 80, 120
+
+
+@pytest.fixture(scope="module")
+def envs():
+    ps = gym.make("ShelfSort-v0")
+    s = gym.make("ShelfSort-v0", primitives=("pick",))
+    yield ps, s
+    ps.close()
+    s.close()
+
+
+def observation(objects, regions=((0, 79, 0, 35), (0, 79, 42, 77), (0, 79, 84, 119))) -> np.ndarray:
+    """Recoloured map: white floor, tinted regions (rows/cols inclusive), class-coloured blobs."""
+    rgb = np.empty((H, W, 3), dtype=np.uint8)
+    rgb[:] = FREE_RGB
+    for k, (r0, r1, c0, c1) in enumerate(regions):
+        rgb[r0:r1 + 1, c0:c1 + 1] = REGION_RGB[k]
+    height = np.zeros((H, W), dtype=np.uint8)
+    for cls, r0, r1, c0, c1 in objects:
+        rgb[r0:r1 + 1, c0:c1 + 1] = CLASS_RGB[cls]
+        height[r0:r1 + 1, c0:c1 + 1] = 60
+    return np.concatenate([rgb.transpose(2, 0, 1), height[None]])
+
+
+def cell(action: int) -> tuple[int, int, int]:
+    m, rest = divmod(int(action), H * W)
+    return m, rest // W, rest % W
+
+
+def test_h_d_picks_the_object_farthest_from_its_region_away_from_its_edge(envs):
+    # class 0's region is the left strip (cols 0..35); one green box just right of it, one far right
+    obs = observation([(0, 30, 41, 45, 56), (0, 30, 41, 100, 111)])
+    m, row, col = cell(DistanceHeuristic(envs[0]).predict(obs)[0])
+    assert m == 0 and 30 <= row <= 41 and 100 <= col <= 111
+    assert 30 + 3 <= row <= 41 - 3 and 100 + 3 <= col <= 111 - 3  # a cup radius inside the blob
+
+
+def test_h_a_prefers_the_front_one_of_equally_misplaced_objects(envs):
+    # two green boxes equally far from the left strip: one at the back, one at the front
+    obs = observation([(0, 5, 16, 90, 101), (0, 60, 71, 90, 101)])
+    _, row, _ = cell(AccessibilityHeuristic(envs[0]).predict(obs)[0])
+    assert row >= 60
+    _, row_d, _ = cell(DistanceHeuristic(envs[0]).predict(obs)[0])  # H-d has no preference: ties -> front
+    assert row_d >= 60
+
+
+def test_h_a_never_picks_a_sorted_object_while_one_is_misplaced(envs):
+    # a blue box sorted at the very front, a yellow one misplaced at the back
+    obs = observation([(2, 66, 77, 95, 106), (1, 2, 13, 10, 21)])
+    _, row, col = cell(AccessibilityHeuristic(envs[0]).predict(obs)[0])
+    assert row <= 13 and col <= 21
+
+
+def test_h_a_uncovers_when_everything_visible_is_sorted(envs):
+    obs = observation([(0, 10, 21, 5, 16), (2, 60, 71, 95, 106)])
+    _, row, col = cell(AccessibilityHeuristic(envs[0]).predict(obs)[0])
+    assert row >= 60 and col >= 95
+
+
+def test_pick_only_layout_and_batches(envs):
+    obs = observation([(1, 30, 41, 100, 111)])
+    for env in envs:
+        action, state = DistanceHeuristic(env).predict(obs, deterministic=True)
+        assert state is None and cell(action)[0] == 0 and action < env.action_space.n
+    batch, _ = AccessibilityHeuristic(envs[1]).predict(np.stack([obs, obs]))
+    assert batch.shape == (2,)
+    with pytest.raises(ValueError, match="observation shape"):
+        DistanceHeuristic(envs[0]).predict(obs[:, :10])
+
+
+def test_random_policy_covers_the_layout(envs):
+    policy = RandomPolicy(envs[0], seed=0)
+    actions = [int(policy.predict(observation([]))[0]) for _ in range(300)]
+    assert max(actions) < envs[0].action_space.n and len({a // (H * W) for a in actions}) == 3
+
+
+def test_heuristics_need_a_shelf_env():
+    with pytest.raises(ValueError, match="ShelfSort-v0"):
+        DistanceHeuristic(FindTheSquareEnv())
