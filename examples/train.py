@@ -43,6 +43,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--learning-starts", type=int, default=100)
     p.add_argument("--learning-rate", type=float, default=1e-4)
     p.add_argument("--exploration-timesteps", type=int, default=2_000)
+    p.add_argument("--min-stage-timesteps", type=int, default=0,
+                   help="curriculum stages last at least this many steps (0: the paper's rule)")
     p.add_argument("--uniform-exploration", action="store_true", help="draw exploratory actions uniformly")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
@@ -161,7 +163,8 @@ def main(argv: list[str] | None = None) -> None:
     if budget.wall_seconds() >= budget.budget_seconds or model.num_timesteps >= args.max_steps:
         print("budget already spent; nothing to do")
         return
-    curriculum = CurriculumCallback(start_value=args.start_objects, max_value=args.max_objects, verbose=1)
+    curriculum = CurriculumCallback(start_value=args.start_objects, max_value=args.max_objects,
+                                    min_stage_timesteps=args.min_stage_timesteps, verbose=1)
     model.learn(10**9, callback=CallbackList([curriculum, budget]), log_interval=5, reset_num_timesteps=not resume)
     print(f"done: {model.num_timesteps} steps, {progress['wall_seconds'] / 60:.1f} min, "
           f"curriculum {model.curriculum_state['history']}", flush=True)

@@ -31,6 +31,9 @@ class CurriculumCallback(BaseCallback):
     :param window: episodes of the current stage over which success is averaged.
     :param threshold: the success rate must exceed this to advance.
     :param setter: name of the env method that sets N for the following episodes.
+    :param min_stage_timesteps: env steps a stage lasts at least (0: as the paper). Setting it to
+        the algorithm's ``exploration_timesteps`` makes a stage advance only once ε has decayed,
+        so that the success that promotes it is the policy's rather than exploration's.
     :param verbose: 1 prints each stage change.
     """
 
@@ -41,6 +44,7 @@ class CurriculumCallback(BaseCallback):
         window: int = WINDOW,
         threshold: float = THRESHOLD,
         setter: str = "set_num_objects",
+        min_stage_timesteps: int = 0,
         verbose: int = 0,
     ) -> None:
         super().__init__(verbose)
@@ -53,6 +57,7 @@ class CurriculumCallback(BaseCallback):
         self.window = window
         self.threshold = threshold
         self.setter = setter
+        self.min_stage_timesteps = int(min_stage_timesteps)
         self.value = start_value
         self.outcomes: deque[bool] = deque(maxlen=window)
         self.history: list[list[int]] = []
@@ -94,6 +99,7 @@ class CurriculumCallback(BaseCallback):
             self.value < self.max_value
             and len(self.outcomes) == self.window
             and float(np.mean(self.outcomes)) > self.threshold
+            and self.model.num_timesteps - self.history[-1][0] >= self.min_stage_timesteps
         ):
             self._advance()
         self.logger.record("curriculum/num_objects", self.value)

@@ -49,6 +49,13 @@ def test_does_not_advance_below_threshold():
     assert curriculum.value == 1 and model.stage_timesteps == 60
 
 
+def test_min_stage_timesteps_holds_a_stage():
+    model = PixelDoubleDQN("FCNPolicy", CoinEnv(p_success=1.0), **KW)
+    curriculum = CurriculumCallback(window=5, max_value=3, min_stage_timesteps=12)
+    model.learn(30, callback=curriculum)
+    assert [t for t, _ in curriculum.history] == [0, 12, 24]
+
+
 def test_several_envs_all_get_the_new_n():
     env = make_vec_env(lambda: CoinEnv(p_success=1.0), n_envs=3)
     model = PixelDoubleDQN("FCNPolicy", env, **KW)
