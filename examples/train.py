@@ -62,13 +62,14 @@ class BudgetAndCheckpoint(BaseCallback):
         self.max_steps = max_steps
         self.every_seconds = every_minutes * 60.0
         self.session_start = time.monotonic()
+        self.wall_before_session = float(progress["wall_seconds"])
         self.last_checkpoint = self.session_start
         self.csv_file = None
         self.writer = None
         self.episode_returns: dict[int, float] = {}
 
     def wall_seconds(self) -> float:
-        return self.progress["wall_seconds"] + time.monotonic() - self.session_start
+        return self.wall_before_session + time.monotonic() - self.session_start
 
     def _on_training_start(self) -> None:
         self.csv_file = open(self.out / "episodes.csv", "a", newline="")  # noqa: SIM115

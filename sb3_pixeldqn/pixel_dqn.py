@@ -330,6 +330,8 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         **kwargs: Any,
     ) -> SelfPixelDoubleDQN:
         """SB3 load, with errors that name the problem for corrupt files and mismatched map layouts."""
+        if isinstance(path, (str, pathlib.Path)) and not _with_suffix(path, ".zip").is_file():
+            raise FileNotFoundError(f"no {cls.__name__} checkpoint at {path}")
         try:
             return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
         except (zipfile.BadZipFile, EOFError, KeyError, AssertionError, pickle.UnpicklingError, RuntimeError) as err:

@@ -176,6 +176,8 @@ def test_load_errors_name_the_problem(tmp_path):
     model.save(tmp_path / "s_model.zip")
     with pytest.raises(ValueError, match=r"does not fit this env.*\[pick@0\]"):
         PixelDoubleDQN.load(tmp_path / "s_model.zip", env=FindTheSquareEnv(n_maps=3))
+    with pytest.raises(FileNotFoundError, match="no PixelDoubleDQN checkpoint at"):
+        PixelDoubleDQN.load(tmp_path / "missing.zip")
     (tmp_path / "junk.zip").write_bytes(b"this is not a zip file")
     with pytest.raises(ValueError, match="not a readable PixelDoubleDQN checkpoint"):
         PixelDoubleDQN.load(tmp_path / "junk.zip")
