@@ -88,7 +88,7 @@ def test_tensorboard_gets_the_promised_scalars(tmp_path):
 
     model = PixelDoubleDQN("FCNPolicy", CoinEnv(p_success=1.0), tensorboard_log=str(tmp_path),
                            **{**KW, "learning_starts": 5})
-    model.learn(40, callback=CurriculumCallback(window=5), log_interval=2)
+    model.learn(40, callback=CurriculumCallback(window=5), log_interval=2, progress_bar=True)
     (run,) = glob.glob(str(tmp_path / "PixelDoubleDQN_*"))
     events = EventAccumulator(run)
     events.Reload()

@@ -1,0 +1,32 @@
+"""examples/train.py on the real env for a handful of steps: checkpoints, honest wall time, resume."""
+
+import csv
+import json
+import pathlib
+import sys
+import time
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "examples"))
+import train  # noqa: E402
+
+
+def test_checkpoints_count_wall_time_once_and_resume(tmp_path):
+    common = ["--out", str(tmp_path), "--learning-starts", "2", "--buffer-size", "200", "--widths", "4", "8", "8",
+              "--checkpoint-minutes", "0", "--threads", "1"]
+    t0 = time.monotonic()
+    train.main([*common, "--max-steps", "4"])
+    elapsed = time.monotonic() - t0
+    progress = json.loads((tmp_path / "progress.json").read_text())
+    assert progress["timesteps"] == 4
+    # checkpoints after every step: the recorded total must still be the real time, not a sum of totals
+    assert 0 < progress["wall_seconds"] <= elapsed + 1.0
+    assert (tmp_path / "model.zip").exists() and (tmp_path / "replay.pkl").exists()
+
+    train.main([*common, "--max-steps", "7"])
+    progress2 = json.loads((tmp_path / "progress.json").read_text())
+    assert progress2["timesteps"] == 7 and progress2["wall_seconds"] > progress["wall_seconds"]
+    assert progress2["curriculum"]["value"] == 1
+    with open(tmp_path / "episodes.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == progress2["episodes"]
+    assert all(int(a["timestep"]) < int(b["timestep"]) for a, b in zip(rows, rows[1:]))
