@@ -24,17 +24,12 @@ import torch as th
 
 import shelf_env  # noqa: F401
 from sb3_pixeldqn import PixelDoubleDQN
+from sb3_pixeldqn.pixel_dqn import draw_masked_action
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 from pixel_envs import FindTheSquareEnv  # noqa: E402
 
 MOVED = 0.005
-
-
-def masked_action(mask: np.ndarray, n_maps: int, rng: np.random.Generator) -> int:
-    per_map = mask.reshape(n_maps, -1)
-    m = int(rng.choice(np.flatnonzero(per_map.any(axis=1))))
-    return m * per_map.shape[1] + int(rng.choice(np.flatnonzero(per_map[m])))
 
 
 def effective_fraction(n: int, mode: str, actions: int, seed: int) -> float:
@@ -47,7 +42,7 @@ def effective_fraction(n: int, mode: str, actions: int, seed: int) -> float:
         if mode == "uniform":
             action = int(rng.integers(env.action_space.n))
         else:
-            action = masked_action(env.exploration_mask(), len(env.map_names), rng)
+            action = draw_masked_action(env.exploration_mask(), len(env.map_names), rng)
         _, _, terminated, truncated, _ = env.step(action)
         taken += 1
         after = env.world.positions()[:, :3]

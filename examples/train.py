@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import os
 import pathlib
 import time
 
@@ -25,6 +24,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, CurriculumCallback, PixelDoubleDQN
+from shelf_env.evaluation import write_json_atomic
 
 EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
 
@@ -108,16 +108,10 @@ class BudgetAndCheckpoint(BaseCallback):
             timesteps=self.model.num_timesteps,
             curriculum=self.model.curriculum_state,
         )
-        write_json(self.out / "progress.json", self.progress)
+        write_json_atomic(self.out / "progress.json", self.progress)
         self.last_checkpoint = time.monotonic()
         print(f"[{self.progress['wall_seconds'] / 60:6.1f} min] checkpoint at step {self.model.num_timesteps}, "
               f"N = {self.model.curriculum_state['value']}", flush=True)
-
-
-def write_json(path: pathlib.Path, data: dict) -> None:
-    tmp = path.with_name(f".{path.name}.partial")
-    tmp.write_text(json.dumps(data, indent=1))
-    os.replace(tmp, path)
 
 
 def truncate_csv(path: pathlib.Path, rows: int) -> None:

@@ -88,6 +88,7 @@ class CurriculumCallback(BaseCallback):
         self.logger.record("curriculum/num_objects", self.value)
 
     def _on_step(self) -> bool:
+        changed = False
         for i, (done, info) in enumerate(zip(self.locals["dones"], self.locals["infos"])):
             if not done:
                 continue
@@ -95,6 +96,7 @@ class CurriculumCallback(BaseCallback):
                 self._stale[i] = False
             elif "is_success" in info:
                 self.outcomes.append(bool(info["is_success"]))
+                changed = True
         if (
             self.value < self.max_value
             and len(self.outcomes) == self.window
@@ -103,7 +105,8 @@ class CurriculumCallback(BaseCallback):
         ):
             self._advance()
         self.logger.record("curriculum/num_objects", self.value)
-        self._save_state()
+        if changed:  # _advance saves its own change
+            self._save_state()
         return True
 
     def _advance(self) -> None:
@@ -114,6 +117,7 @@ class CurriculumCallback(BaseCallback):
         self._stale[:] = True
         self.model.restart_exploration()  # type: ignore[attr-defined]
         self.history.append([self.model.num_timesteps, self.value])
+        self._save_state()
         if self.verbose:
             print(f"curriculum: N = {self.value} at step {self.model.num_timesteps}")
 

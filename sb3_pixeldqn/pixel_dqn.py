@@ -243,7 +243,6 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         if self.exploration_mask is None:
             return np.random.randint(n_actions, size=len(env_indices))
         masks = self.env.env_method(self.exploration_mask, indices=[int(i) for i in env_indices])  # type: ignore[union-attr]
-        n_maps = self.policy.n_maps
         actions = []
         for mask in masks:
             mask = np.asarray(mask, dtype=bool).reshape(-1)
@@ -252,15 +251,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
                     f"env method {self.exploration_mask!r} returned a mask of {mask.size} entries; "
                     f"expected one per action ({n_actions})"
                 )
-            # a map first (uniform over maps with a useful pixel), then a useful pixel of it, so a
-            # primitive with a large mask (pushes) does not crowd out one with a small mask (picks)
-            per_map = mask.reshape(n_maps, -1)
-            maps = np.flatnonzero(per_map.any(axis=1))
-            if maps.size == 0:
-                actions.append(np.random.randint(n_actions))
-                continue
-            m = int(np.random.choice(maps))
-            actions.append(m * per_map.shape[1] + int(np.random.choice(np.flatnonzero(per_map[m]))))
+            actions.append(draw_masked_action(mask, self.policy.n_maps, np.random))
         return np.asarray(actions, dtype=np.int64)
 
     def predict(
@@ -349,6 +340,19 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
                 f"{(data or {}).get('observation_space')}; the env has {env.observation_space if env else '?'} "
                 f"and {env.action_space if env else '?'}."
             ) from err
+
+
+def draw_masked_action(mask: np.ndarray, n_maps: int, rng: Any) -> int:
+    """One exploratory action from a boolean action mask: a map drawn uniformly among the maps with
+    a useful pixel, then one of its useful pixels, so a primitive with a large mask (pushes) does
+    not crowd out one with a small mask (picks). Uniform over all actions if the mask is empty.
+    ``rng`` is anything with ``choice`` (``np.random`` or a ``np.random.Generator``)."""
+    per_map = np.asarray(mask, dtype=bool).reshape(n_maps, -1)
+    maps = np.flatnonzero(per_map.any(axis=1))
+    if maps.size == 0:
+        return int(rng.choice(per_map.size))
+    m = int(rng.choice(maps))
+    return m * per_map.shape[1] + int(rng.choice(np.flatnonzero(per_map[m])))
 
 
 def _with_suffix(path: str | pathlib.Path, suffix: str) -> pathlib.Path:

@@ -92,8 +92,10 @@ class PixelQNetwork(nn.Module):
         for name in self.fcns:
             rows_per_map, views = [], []
             for m, (n, degrees) in enumerate(self.maps):
+                if n != name:
+                    continue
                 rows = th.nonzero(map_index == m, as_tuple=True)[0]
-                if n == name and rows.numel():
+                if rows.numel():
                     rows_per_map.append(rows)
                     views.append((images[rows], degrees))
             if not views:

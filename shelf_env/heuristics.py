@@ -29,6 +29,7 @@ import numpy as np
 
 from shelf_env.camera import CLASS_RGB, REGION_RGB
 from shelf_env.env import ShelfSortEnv
+from shelf_env.placement import _window_sum
 
 #: Cup radius in cells at the default 5 mm (13 mm cup): graspable cells are this far inside a blob.
 CUP_MARGIN_M = 0.013
@@ -82,32 +83,14 @@ class ObservationView:
 
 def _erode(mask: np.ndarray, radius: int) -> np.ndarray:
     """Cells of ``mask`` whose whole (2r+1) x (2r+1) neighbourhood is in ``mask``."""
-    if radius <= 0:
-        return mask.copy()
-    padded = np.pad(mask, radius, constant_values=False)
-    out = np.ones_like(mask)
-    h, w = mask.shape
-    for dr in range(2 * radius + 1):
-        for dc in range(2 * radius + 1):
-            out &= padded[dr:dr + h, dc:dc + w]
-    return out
+    side = 2 * radius + 1
+    return _window_sum(mask, side, side) == side * side
 
 
-class PickHeuristic:
-    """Shared plumbing: the env's layout, batching and SB3's ``predict`` signature."""
+class ObservationPolicy:
+    """SB3's ``predict`` over one observation or a batch, for policies that act on one at a time."""
 
-    def __init__(self, env: gym.Env) -> None:
-        base = env.unwrapped
-        if not isinstance(base, ShelfSortEnv):
-            raise ValueError(f"{type(self).__name__} needs a ShelfSort-v0 env, got {type(base).__name__}")
-        if "pick" not in base.map_names:
-            raise ValueError(f"{type(self).__name__} needs the pick primitive; the env has {base.map_names}")
-        self.observation_space = base.observation_space
-        self.action_space = base.action_space
-        self.pick_map = base.map_names.index("pick")
-        self.rows, self.cols = base.rows, base.cols
-        self.pixel_size = base.camera.pixel_size
-        self.margin_cells = int(round(CUP_MARGIN_M / self.pixel_size))
+    observation_space: gym.spaces.Box
 
     def predict(
         self,
@@ -123,6 +106,26 @@ class PickHeuristic:
         if obs.ndim == 4 and obs.shape[1:] == shape:
             return np.array([self._act(o) for o in obs]), None
         raise ValueError(f"{type(self).__name__}: observation shape {obs.shape} is not {shape} or (n, *{shape})")
+
+    def _act(self, obs: np.ndarray) -> int:
+        raise NotImplementedError
+
+
+class PickHeuristic(ObservationPolicy):
+    """Shared plumbing of H-d and H-a: the env's layout and the pick action of a chosen cell."""
+
+    def __init__(self, env: gym.Env) -> None:
+        base = env.unwrapped
+        if not isinstance(base, ShelfSortEnv):
+            raise ValueError(f"{type(self).__name__} needs a ShelfSort-v0 env, got {type(base).__name__}")
+        if "pick" not in base.map_names:
+            raise ValueError(f"{type(self).__name__} needs the pick primitive; the env has {base.map_names}")
+        self.observation_space = base.observation_space
+        self.action_space = base.action_space
+        self.pick_map = base.map_names.index("pick")
+        self.rows, self.cols = base.rows, base.cols
+        self.pixel_size = base.camera.pixel_size
+        self.margin_cells = int(round(CUP_MARGIN_M / self.pixel_size))
 
     def _pick(self, row: int, col: int) -> int:
         return self.pick_map * self.rows * self.cols + int(row) * self.cols + int(col)
@@ -168,7 +171,7 @@ class AccessibilityHeuristic(PickHeuristic):
         return int(row), int(col)
 
 
-class RandomPolicy:
+class RandomPolicy(ObservationPolicy):
     """Uniform over all actions of the env's layout: the floor every policy must beat."""
 
     def __init__(self, env: gym.Env, seed: int | None = None) -> None:
@@ -176,15 +179,5 @@ class RandomPolicy:
         self.observation_space = env.observation_space
         self.rng = np.random.default_rng(seed)
 
-    def predict(
-        self,
-        observation: np.ndarray,
-        state: tuple | None = None,
-        episode_start: np.ndarray | None = None,
-        deterministic: bool = True,
-    ) -> tuple[np.ndarray, None]:
-        obs = np.asarray(observation)
-        n = int(self.action_space.n)
-        if obs.shape == self.observation_space.shape:
-            return np.array(self.rng.integers(n)), None
-        return self.rng.integers(n, size=obs.shape[0]), None
+    def _act(self, obs: np.ndarray) -> int:
+        return int(self.rng.integers(int(self.action_space.n)))
