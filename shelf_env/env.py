@@ -26,6 +26,10 @@ ends valid with every object inside some target region but not all in their own,
 ``info["relabelled"]`` holds ``{"obs", "next_obs", "reward", "terminated"}``: both observations
 recoloured with every object's class replaced by the class of the region it is in, reward 0,
 terminated True. The action is unchanged.
+
+``sleeping=True`` (default) lets objects at rest sleep in Bullet between contacts, which makes a
+step 2-3x cheaper with many objects; ``sleeping=False`` simulates every object at every physics
+step (see `shelf_env.world`).
 """
 
 from __future__ import annotations
@@ -72,6 +76,7 @@ class ShelfSortEnv(gym.Env):
         pixel_size: float = params.PIXEL_SIZE,
         camera: CameraConfig | None = None,
         max_objects: int = params.MAX_OBJECTS,
+        sleeping: bool = True,
     ) -> None:
         if object_set not in OBJECT_SETS:
             raise ValueError(f"unknown object_set {object_set!r}; expected one of {OBJECT_SETS}")
@@ -96,7 +101,7 @@ class ShelfSortEnv(gym.Env):
         self.render_mode = render_mode
 
         self.client = pb.connect(pb.DIRECT)
-        self.world = World(self.client)
+        self.world = World(self.client, sleeping=sleeping)
         self.robot = Robot(self.client)
         self.camera = HeightmapCamera(self.client, camera, pixel_size, hidden_bodies=self.world.decorative,
                                       wall_uids=self.world.wall_uids)
@@ -230,6 +235,7 @@ class ShelfSortEnv(gym.Env):
         name, row, col = self.decode_action(action)
         prev_semantic = self._semantic
         x, y = self._clip_target(*self.camera.cell_centre(row, col))
+        self.world.sleep_resting()
         if name == "pick":
             surface = float(prev_semantic[1][row, col])
             self.primitive_runner.pick_and_place(x, y, surface, self._place_for)

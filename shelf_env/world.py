@@ -16,6 +16,15 @@ Definitions used by the reward and the tests:
   below REST_ANGULAR_SPEED.
 - The scene is *valid* when every object is inside and at rest; *sorted* when it is valid and
   every object is in the region of its own class.
+
+Sleeping (speed, not physics): with ``sleeping=True`` (the default) objects use Bullet's
+deactivation. Before each primitive the env puts every object at rest to sleep
+(:meth:`World.sleep_resting`); a sleeping object costs almost nothing per physics step and is
+woken by any contact with an awake body (the tool, a held or a moving object), or when an object
+it touches is woken. A woken object only falls asleep again after two seconds below
+REST_LINEAR_SPEED. Resting contacts of untouched objects otherwise dominate the step cost (0.36 ms
+vs 0.10 ms per step with 8 YCB objects); `tests/test_world.py` checks that a push moves a sleeping
+object as it moves an awake one.
 """
 
 from __future__ import annotations
@@ -113,8 +122,9 @@ def sample_regions(
 class World:
     """A PyBullet client holding the cabinet, the ground and the current objects."""
 
-    def __init__(self, client: int) -> None:
+    def __init__(self, client: int, sleeping: bool = True) -> None:
         self.client = client
+        self.sleeping = bool(sleeping)
         pb.setGravity(0, 0, -9.81, physicsClientId=client)
         pb.setTimeStep(params.TIME_STEP, physicsClientId=client)
         self._shape_cache: dict[tuple, int] = {}
@@ -201,6 +211,10 @@ class World:
             uid, -1, lateralFriction=0.5, spinningFriction=0.001, rollingFriction=0.0001,
             restitution=0.0, physicsClientId=self.client,
         )
+        if self.sleeping:
+            # sleepThreshold is on the squared speed: asleep only after 2 s below REST_LINEAR_SPEED
+            pb.changeDynamics(uid, -1, activationState=pb.ACTIVATION_STATE_ENABLE_SLEEPING,
+                              sleepThreshold=params.REST_LINEAR_SPEED ** 2, physicsClientId=self.client)
         obj = PlacedObject(uid, spec, cls)
         self.objects.append(obj)
         return obj
@@ -275,6 +289,15 @@ class World:
             out.append(np.linalg.norm(lin) < params.REST_LINEAR_SPEED
                        and np.linalg.norm(ang) < params.REST_ANGULAR_SPEED)
         return np.array(out, dtype=bool)
+
+    def sleep_resting(self) -> None:
+        """Put every object at rest to sleep (no-op unless ``sleeping``); see module docstring."""
+        if not self.sleeping:
+            return
+        for obj, resting in zip(self.objects, self.at_rest()):
+            if resting:
+                pb.changeDynamics(obj.uid, -1, activationState=pb.ACTIVATION_STATE_SLEEP,
+                                  physicsClientId=self.client)
 
     def region_of(self, pos: np.ndarray) -> np.ndarray:
         """Index of the region holding each position's (x, y), or -1 for none."""

@@ -99,3 +99,25 @@ def test_set_scene_rejects_bad_input_before_touching_the_scene(env):
     with pytest.raises(ValueError, match="regions"):
         env.set_scene([(box(), 0, 0.2, 0.0, 0.0)], REGIONS[:2])
     assert [o.uid for o in env.world.objects] == before
+
+
+def test_sleeping_objects_move_as_awake_ones():
+    """Bullet's sleeping is a speed-up only: a push through a chain of two sleeping boxes and a
+    pick of the second one end where they end with every object simulated at every step."""
+    import gymnasium as gym
+
+    finals = {}
+    for sleeping in (True, False):
+        env = gym.make("ShelfSort-v0", sleeping=sleeping).unwrapped
+        env.set_scene([(box(), 0, 0.20, 0.0, 0.0), (box(0.05, 0.05, 0.07), 1, 0.20, -0.07, 0.0),
+                       (box(), 2, 0.32, 0.20, 0.0)], REGIONS)
+        env.step(action_at(env, "push_right", 0.20, 0.05))  # blade -> box 0 -> box 1
+        pushed = env.world.positions().copy()
+        env.step(action_at(env, "pick", *pushed[1][:2]))
+        finals[sleeping] = (pushed, env.world.positions().copy())
+        env.close()
+    pushed, placed = finals[True]
+    assert pushed[1][1] < -0.11  # the push really reached the second box through the first
+    assert placed[1][0] > 0.3  # and the pick really moved it
+    for a, b in zip(finals[True], finals[False]):
+        assert np.abs(a - b).max() < 0.002, (a, b)
