@@ -7,17 +7,23 @@ learned policy. They expose SB3's ``predict(obs, state, episode_start, determini
 one evaluation loop runs every policy.
 
 What they read from the observation (`ObservationView`): the class of each visible object cell
-(its colour), each class's target region (the bounding box of its visible tint — regions are
-rectangles, and objects standing in a region hide part of its tint) and the cells a suction cup
-can grip (object cells at least a cup radius inside the visible blob of their class, so that the
-cup does not land on an edge).
+(its colour), the visible objects (connected blobs of one class colour), each class's target
+region (the bounding box of its visible tint — regions are rectangles, and objects standing in a
+region hide part of its tint) and the cells a suction cup can grip (cells at least a cup radius
+inside their blob, or the whole blob when it is thinner than the cup). An object counts as
+*sorted* when its blob's centroid lies in its class's region: the observable counterpart of the
+env's rule (base position in the region). Without it a pixel rule keeps re-picking sorted objects
+whose edge pokes out of their region.
 
-- **H-d**: among graspable cells, the one farthest from its class's region (§V-a: "evaluates each
-  pixel's distance from the target region and selects the pixel with the largest distance").
-- **H-a**: among graspable cells not yet in their region, the one with the largest
+- **H-d**: among graspable cells of unsorted objects, the one farthest from its class's region
+  (§V-a: "evaluates each pixel's distance from the target region and selects the pixel with the
+  largest distance").
+- **H-a**: among graspable cells of unsorted objects, the one with the largest
   distance-from-region plus distance-from-the-back: objects in front are more accessible and
-  hide others. When every visible object sits in its region, it picks the frontmost object, to
-  reveal what it hides.
+  hide others.
+
+When every visible object is sorted but the episode goes on, something is hidden: both pick the
+front-most object, to reveal what it hides.
 """
 
 from __future__ import annotations
@@ -40,8 +46,10 @@ class ObservationView:
     """What a heuristic reads from one observation ``(4, H, W)``."""
 
     object_class: np.ndarray  # (H, W) int: class of the visible object cell, -1 elsewhere
+    blob: np.ndarray  # (H, W) int: index of the visible object (connected blob), -1 elsewhere
     regions: list[tuple[int, int, int, int] | None]  # per class (row0, row1, col0, col1), inclusive
-    graspable: np.ndarray  # (H, W) bool: object cells a cup radius inside their class blob
+    graspable: np.ndarray  # (H, W) bool: object cells a cup radius inside their blob
+    sorted_cells: np.ndarray  # (H, W) bool: cells of objects whose blob centroid is in their region
 
     @classmethod
     def from_observation(cls, obs: np.ndarray, margin_cells: int) -> ObservationView:
@@ -53,12 +61,19 @@ class ObservationView:
         for colour in REGION_RGB:
             rows, cols = np.nonzero((rgb == colour).all(axis=-1))
             regions.append((rows.min(), rows.max(), cols.min(), cols.max()) if rows.size else None)
+        blob = label_blobs(object_class)
         graspable = np.zeros_like(object_class, dtype=bool)
-        for k in range(len(CLASS_RGB)):
-            blob = object_class == k
-            inner = _erode(blob, margin_cells)
-            graspable |= inner if inner.any() else blob
-        return cls(object_class, regions, graspable)
+        sorted_cells = np.zeros_like(graspable)
+        for b in range(blob.max() + 1):
+            cells = blob == b
+            inner = _erode(cells, margin_cells)
+            graspable |= inner if inner.any() else cells
+            rect = regions[object_class[cells][0]]
+            rows, cols = np.nonzero(cells)
+            r, c = rows.mean(), cols.mean()
+            if rect is not None and rect[0] <= r <= rect[1] and rect[2] <= c <= rect[3]:
+                sorted_cells |= cells
+        return cls(object_class, blob, regions, graspable, sorted_cells)
 
     def distance_to_region(self) -> np.ndarray:
         """(H, W) distance in cells from each object cell to its class's region rectangle (0 inside).
@@ -79,6 +94,33 @@ class ObservationView:
             dc = np.maximum(np.maximum(c0 - cols, cols - c1), 0)
             dist[cells] = np.hypot(dr, dc)[cells]
         return dist
+
+
+def label_blobs(labels: np.ndarray) -> np.ndarray:
+    """Connected components (4-neighbourhood) of the cells sharing a label >= 0: (H, W) int with
+    blobs numbered 0..n-1 in raster order of their first cell, -1 where ``labels`` < 0.
+
+    Min-index propagation: every cell repeatedly takes the smallest index among itself and its
+    same-label neighbours, until nothing changes (at most a blob's longest path, in numpy steps).
+    """
+    h, w = labels.shape
+    big = h * w
+    idx = np.where(labels >= 0, np.arange(big).reshape(h, w), big)
+    same_down = (labels[1:] == labels[:-1]) & (labels[1:] >= 0)
+    same_right = (labels[:, 1:] == labels[:, :-1]) & (labels[:, 1:] >= 0)
+    while True:
+        new = idx.copy()
+        new[1:] = np.where(same_down, np.minimum(new[1:], idx[:-1]), new[1:])
+        new[:-1] = np.where(same_down, np.minimum(new[:-1], idx[1:]), new[:-1])
+        new[:, 1:] = np.where(same_right, np.minimum(new[:, 1:], new[:, :-1]), new[:, 1:])
+        new[:, :-1] = np.where(same_right, np.minimum(new[:, :-1], new[:, 1:]), new[:, :-1])
+        if np.array_equal(new, idx):
+            break
+        idx = new
+    out = np.full((h, w), -1, dtype=np.int64)
+    roots = np.unique(idx[idx < big])
+    out[idx < big] = np.searchsorted(roots, idx[idx < big])
+    return out
 
 
 def _erode(mask: np.ndarray, radius: int) -> np.ndarray:
@@ -142,33 +184,43 @@ class PickHeuristic(ObservationPolicy):
 
 
 class DistanceHeuristic(PickHeuristic):
-    """H-d: pick the graspable cell farthest from its class's target region (front-most on ties)."""
+    """H-d: pick the graspable cell of an unsorted object farthest from its class's target region
+    (front-most on ties); if every visible object is sorted, the front-most object."""
 
     def choose(self, view: ObservationView) -> tuple[int, int]:
-        dist = np.where(view.graspable, view.distance_to_region(), -1.0)
+        candidates = view.graspable & ~view.sorted_cells
+        if not candidates.any():
+            return _front_most(view.graspable)
+        dist = np.where(candidates, view.distance_to_region(), -1.0)
         rows, cols = np.nonzero(dist == dist.max())
         i = int(np.argmax(rows))  # ties: the front-most cell
         return int(rows[i]), int(cols[i])
 
 
 class AccessibilityHeuristic(PickHeuristic):
-    """H-a: among misplaced graspable cells, maximise distance-from-region + ``front_weight`` x
-    distance-from-the-back (both in cells); if none is misplaced, pick the front-most object."""
+    """H-a: among graspable cells of unsorted objects, maximise distance-from-region +
+    ``front_weight`` x distance-from-the-back (both in cells); if every visible object is sorted,
+    the front-most object."""
 
     def __init__(self, env: gym.Env, front_weight: float = 1.0) -> None:
         super().__init__(env)
         self.front_weight = front_weight
 
     def choose(self, view: ObservationView) -> tuple[int, int]:
-        dist = view.distance_to_region()
-        misplaced = view.graspable & (dist > 0)
+        candidates = view.graspable & ~view.sorted_cells
+        if not candidates.any():
+            return _front_most(view.graspable)
         rows = np.arange(self.rows)[:, None] * np.ones((1, self.cols))  # row index = distance from the back
-        if misplaced.any():
-            score = np.where(misplaced, dist + self.front_weight * rows, -np.inf)
-        else:
-            score = np.where(view.graspable, rows, -np.inf)
+        score = np.where(candidates, view.distance_to_region() + self.front_weight * rows, -np.inf)
         row, col = np.unravel_index(int(np.argmax(score)), score.shape)
         return int(row), int(col)
+
+
+def _front_most(cells: np.ndarray) -> tuple[int, int]:
+    """The front-most (largest row) of ``cells``, the middle one of that row's cells."""
+    rows, cols = np.nonzero(cells)
+    front = cols[rows == rows.max()]
+    return int(rows.max()), int(front[len(front) // 2])
 
 
 class RandomPolicy(ObservationPolicy):

@@ -7,7 +7,7 @@ from pixel_envs import FindTheSquareEnv
 
 import shelf_env  # noqa: F401
 from shelf_env.camera import CLASS_RGB, FREE_RGB, REGION_RGB
-from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
+from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy, label_blobs
 
 H, W = 80, 120
 
@@ -67,6 +67,38 @@ def test_h_a_uncovers_when_everything_visible_is_sorted(envs):
     obs = observation([(0, 10, 21, 5, 16), (2, 60, 71, 95, 106)])
     _, row, col = cell(AccessibilityHeuristic(envs[0]).predict(obs)[0])
     assert row >= 60 and col >= 95
+
+
+def test_label_blobs_separates_objects_and_classes():
+    labels = np.full((6, 8), -1)
+    labels[0:2, 0:2] = 0  # blob A
+    labels[0:2, 5:8] = 0  # blob B: same class, not touching A
+    labels[3:6, 0] = 1  # an L of class 1 ...
+    labels[5, 0:4] = 1
+    labels[3:5, 1:3] = 2  # ... touching a class-2 square, which stays separate
+    blobs = label_blobs(labels)
+    assert blobs.max() == 3 and (blobs[labels < 0] == -1).all()
+    assert len(np.unique(blobs[0:2, 0:2])) == 1 and blobs[0, 0] != blobs[0, 5]
+    assert len(np.unique(blobs[labels == 1])) == 1 and blobs[5, 3] == blobs[3, 0]
+    assert blobs[3, 1] != blobs[3, 0] and len(np.unique(blobs[labels == 2])) == 1
+
+
+def test_heuristics_skip_sorted_objects_whose_edge_pokes_out_of_their_region(envs):
+    # green region = cols 0..35; a long green box with its centroid inside it pokes 20 cells out
+    # on the right; a green box at cols 38..49 is misplaced but nearer the region than that edge
+    obs = observation([(0, 10, 21, 14, 55), (0, 50, 61, 38, 49)])
+    for policy in (DistanceHeuristic(envs[0]), AccessibilityHeuristic(envs[0])):
+        _, row, col = cell(policy.predict(obs)[0])
+        assert 50 <= row <= 61 and 38 <= col <= 49, type(policy).__name__
+
+
+def test_a_thin_object_is_graspable_next_to_a_wide_one_of_its_class(envs):
+    # regression: the cup-radius erosion fell back to the whole blob per class, not per object, so
+    # a thin blue object (narrower than the cup) beside a wide blue one could never be chosen
+    obs = observation([(2, 40, 51, 90, 101), (2, 60, 63, 20, 40)])  # the wide one is sorted
+    for policy in (DistanceHeuristic(envs[0]), AccessibilityHeuristic(envs[0])):
+        _, row, col = cell(policy.predict(obs)[0])
+        assert 60 <= row <= 63 and 20 <= col <= 40, type(policy).__name__
 
 
 def test_pick_only_layout_and_batches(envs):
