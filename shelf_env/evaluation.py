@@ -210,10 +210,11 @@ def write_results(out: pathlib.Path, records: list[EpisodeRecord], config: dict[
 
 # ---------------------------------------------------------------- plots
 def plot_metrics(rows: list[dict[str, Any]], png: pathlib.Path, object_set: str | None = None,
-                 title: str = "") -> None:
+                 title: str = "") -> list[str]:
     """Fig. 10: SR, AE, mAE against N, one line per policy with a ±1 std band over seeds.
 
     With ``object_set=None`` and rows for several object sets, lines are per (policy, set) — Fig. 12.
+    Returns the line labels, in legend order.
     """
     import matplotlib
 
@@ -222,6 +223,7 @@ def plot_metrics(rows: list[dict[str, Any]], png: pathlib.Path, object_set: str 
 
     sel = [r for r in rows if object_set is None or r["object_set"] == object_set]
     sets = sorted({r["object_set"] for r in sel})
+    labels: list[str] = []
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
     for policy in sorted({r["policy"] for r in sel}):
         for oset in sets:
@@ -230,6 +232,7 @@ def plot_metrics(rows: list[dict[str, Any]], png: pathlib.Path, object_set: str 
             if not line:
                 continue
             label = policy if len(sets) == 1 else f"{policy} ({oset})"
+            labels.append(label)
             ns = np.array([r["num_objects"] for r in line])
             for ax, key, name in zip(axes, ("sr", "ae", "mae"), ("SR (%)", "AE", "mAE")):
                 mean = np.array([r[f"{key}_mean"] for r in line], dtype=float)
@@ -245,3 +248,4 @@ def plot_metrics(rows: list[dict[str, Any]], png: pathlib.Path, object_set: str 
     png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(png, dpi=110)
     plt.close(fig)
+    return labels

@@ -41,6 +41,32 @@ def test_metrics_on_hand_made_records():
     assert none["sr_mean"] == 0.0 and math.isnan(none["ae_mean"]) and math.isnan(none["mae_mean"])
 
 
+def test_fig12_has_one_line_per_policy_and_object_set(tmp_path):
+    records = [EpisodeRecord(policy, oset, n, seed, 0, seed == 0, 5, 2, False)
+               for policy in ("h-a", "h-d") for oset in ("train", "ycb") for n in (3, 4) for seed in (0, 1)]
+    rows = ev.summarize(records)
+    assert len(rows) == 8 and all(r["sr_mean"] == 50.0 and r["sr_std"] == 50.0 for r in rows)
+    labels = ev.plot_metrics(rows, tmp_path / "fig12.png", None)
+    assert labels == ["h-a (train)", "h-a (ycb)", "h-d (train)", "h-d (ycb)"]
+    assert ev.plot_metrics(rows, tmp_path / "fig10.png", "ycb") == ["h-a", "h-d"]
+    assert (tmp_path / "fig12.png").stat().st_size > 10_000
+
+
+def test_an_s_checkpoint_is_evaluated_on_the_pick_only_env(tmp_path):
+    env = gym.make("ShelfSort-v0", primitives=("pick",))
+    model = PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0)], widths=(4, 8, 8)))
+    model.save(tmp_path / "s_model.zip")
+    env.close()
+    records = ev.evaluate_cell(str(tmp_path / "s_model.zip"), 1, 0, 1, "train")
+    (r,) = records
+    assert r.policy == "s_model" and r.num_objects == 1 and 1 <= r.actions <= 40
+    if r.success:
+        assert r.actions < 40 and not r.fell
+    # the zip's layout chose the env: the same checkpoint is refused on the P+S env
+    with pytest.raises(ValueError, match="trained with primitives"):
+        ev.evaluate_cell(str(tmp_path / "s_model.zip"), 1, 0, 1, "train", primitives=("pick", "push"))
+
+
 def test_success_needs_fewer_than_max_actions():
     env = gym.make("ShelfSort-v0", num_objects=1, max_actions=40)
     policy = ev.make_policy("h-d", env)
