@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing as mp
+import os
 import pathlib
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -50,13 +51,19 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
-def _run_cell(policy: str, n: int, seed: int, runs: int, object_set: str, path: str) -> str:
+def _run_cell(policy: str, n: int, seed: int, runs: int, object_set: str, path: str, parent_pid: int) -> bool:
+    """Run one cell and write it; True if written. A worker whose parent died meanwhile (the
+    evaluation was killed, maybe to change the code) discards its cell instead of writing it."""
+    import os
+
     import torch
 
     torch.set_num_threads(1)
     records = ev.evaluate_cell(policy, n, seed, runs, object_set)
+    if os.getppid() != parent_pid:
+        return False
     ev.save_cell(pathlib.Path(path), records)
-    return path
+    return True
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -77,7 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     if todo and not args.summarize_only:
         ctx = mp.get_context("spawn")
         with ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx) as pool:
-            futures = [pool.submit(_run_cell, p, n, s, args.runs, o, str(paths[(p, n, s, o)])) for p, n, s, o in todo]
+            futures = [pool.submit(_run_cell, p, n, s, args.runs, o, str(paths[(p, n, s, o)]), os.getpid())
+                       for p, n, s, o in todo]
             for future in tqdm(as_completed(futures), total=len(futures), desc="cells", unit="cell"):
                 future.result()
     done = [job for job in jobs if paths[job].exists()]

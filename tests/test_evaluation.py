@@ -112,6 +112,17 @@ def test_bad_input_is_refused_before_work(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+def test_orphaned_worker_discards_its_cell(tmp_path):
+    # a worker outliving a killed evaluation must not write a cell made by code that may have changed
+    path = tmp_path / "cells" / "c.json"
+    assert not evaluate_cli._run_cell("h-d", 1, 0, 1, "train", str(path), parent_pid=-1)
+    assert not path.exists()
+    import os
+
+    assert evaluate_cli._run_cell("h-d", 1, 0, 1, "train", str(path), parent_pid=os.getppid())
+    assert len(ev.load_cell(path)) == 1
+
+
 def test_cli_writes_results_and_resumes(tmp_path, capsys):
     argv = ["--policies", "h-a", "--ns", "1", "--runs", "1", "--seeds", "2", "--object-sets", "train",
             "--out", str(tmp_path), "--workers", "1"]
