@@ -5,9 +5,9 @@
 Plays H-d (`shelf_env.heuristics.DistanceHeuristic`) from the same seeded scenes twice, once with
 ``sleeping=False`` (every object simulated at every physics step) and once with ``sleeping=True``
 (the default: objects at rest sleep until touched), alternating the two modes episode by episode so
-that both see the same machine load. Prints seconds per action, milliseconds per physics step and
-the ratios off / on measured in this run, and each episode's outcome in both modes (sleeping is
-meant to change speed, not results).
+that both see the same machine load. Prints seconds per action (whole episodes, reset
+included), milliseconds per physics step and the ratios off / on measured in this run, and each
+episode's outcome in both modes (sleeping is meant to change speed, not results).
 """
 
 from __future__ import annotations
@@ -18,24 +18,18 @@ import time
 import gymnasium as gym
 
 import shelf_env  # noqa: F401
+from shelf_env.evaluation import run_episode
 from shelf_env.heuristics import DistanceHeuristic
 
 
 def play(env: gym.Env, seed: int) -> tuple[float, int, int, tuple[bool, int, bool]]:
-    """One H-d episode: (seconds, actions, physics steps, (success, actions, fell))."""
-    policy = DistanceHeuristic(env)
+    """One H-d episode (the evaluation's own loop): (seconds, actions, physics steps, (success, actions, fell))."""
     robot = env.unwrapped.robot
-    obs, _ = env.reset(seed=seed)
     steps0 = robot.physics_steps
     start = time.perf_counter()
-    while True:
-        action, _ = policy.predict(obs, deterministic=True)
-        obs, _, terminated, truncated, info = env.step(int(action))
-        if terminated or truncated:
-            break
+    out = run_episode(env, DistanceHeuristic(env), seed)
     seconds = time.perf_counter() - start
-    actions = info["action_count"]
-    return seconds, actions, robot.physics_steps - steps0, (info["is_success"], actions, info["fell"])
+    return seconds, out["actions"], robot.physics_steps - steps0, (out["success"], out["actions"], out["fell"])
 
 
 def main() -> None:

@@ -54,8 +54,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def _run_cell(policy: str, n: int, seed: int, runs: int, object_set: str, path: str, parent_pid: int) -> bool:
     """Run one cell and write it; True if written. A worker whose parent died meanwhile (the
     evaluation was killed, maybe to change the code) discards its cell instead of writing it."""
-    import os
-
     import torch
 
     torch.set_num_threads(1)

@@ -27,8 +27,8 @@ ends valid with every object inside some target region but not all in their own,
 recoloured with every object's class replaced by the class of the region it is in, reward 0,
 terminated True. The action is unchanged.
 
-``sleeping=True`` (default) lets objects at rest sleep in Bullet between contacts, which makes a
-step 2-3x cheaper with many objects; ``sleeping=False`` simulates every object at every physics
+``sleeping=True`` (default) lets objects at rest sleep in Bullet between contacts, which makes
+actions cheaper with many objects (`benchmarks/sleeping.py`); ``sleeping=False`` simulates every object at every physics
 step (see `shelf_env.world`).
 """
 

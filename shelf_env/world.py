@@ -22,9 +22,10 @@ deactivation. Before each primitive the env puts every object at rest to sleep
 (:meth:`World.sleep_resting`); a sleeping object costs almost nothing per physics step and is
 woken by any contact with an awake body (the tool, a held or a moving object), or when an object
 it touches is woken. A woken object only falls asleep again after two seconds below
-REST_LINEAR_SPEED. Resting contacts of untouched objects otherwise dominate the step cost (0.36 ms
-vs 0.10 ms per step with 8 YCB objects); `tests/test_world.py` checks that a push moves a sleeping
-object as it moves an awake one.
+REST_LINEAR_SPEED. Resting contacts of untouched objects otherwise dominate the step cost
+(`benchmarks/sleeping.py` measures the effect per action);
+`tests/test_primitives.py::test_sleeping_objects_move_as_awake_ones` checks that a push and a pick
+move sleeping objects as they move awake ones.
 """
 
 from __future__ import annotations

@@ -2,6 +2,7 @@
 
 import json
 import math
+import os
 import pathlib
 import sys
 
@@ -117,8 +118,6 @@ def test_orphaned_worker_discards_its_cell(tmp_path):
     path = tmp_path / "cells" / "c.json"
     assert not evaluate_cli._run_cell("h-d", 1, 0, 1, "train", str(path), parent_pid=-1)
     assert not path.exists()
-    import os
-
     assert evaluate_cli._run_cell("h-d", 1, 0, 1, "train", str(path), parent_pid=os.getppid())
     assert len(ev.load_cell(path)) == 1
 
