@@ -6,6 +6,20 @@ every sub-env (``env.env_method(setter, N)``), restarts the algorithm's ε sched
 window. The env applies the new N at its next reset; episodes that were already running when N
 changed are not counted for the new stage. The stage lives in ``model.curriculum_state``, which is
 saved in the model's zip, so a loaded model resumes at the stage (and ε) where it stopped.
+
+Two promotion rules:
+
+- ``gate="training"`` (the paper's): success over the last ``window`` training episodes, which
+  are ε-greedy. With masked exploration those flatter the policy: a random allowed pick is often
+  right, so a stage can pass before the greedy policy has learned anything.
+- ``gate="greedy"`` (recommended): every ``eval_every`` steps the deterministic policy — masked
+  with the eval env's ``action_masks()`` when it has them, as `PixelDoubleDQN` acts — plays
+  ``eval_episodes`` fresh scenes of ``eval_env`` at the current N; the stage passes when at least
+  ``threshold`` of them succeed. Scenes come from reset seeds drawn from ``eval_seed``'s own
+  stream, never from the training env's.
+
+With an ``eval_env`` the greedy checks run under either gate (``greedy_history``, logged as
+``curriculum/greedy_success``): the learning curve of the policy that will be shipped.
 """
 
 from __future__ import annotations
@@ -13,6 +27,7 @@ from __future__ import annotations
 from collections import deque
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
@@ -21,6 +36,10 @@ START_VALUE = 1
 MAX_VALUE = 8
 WINDOW = 50
 THRESHOLD = 0.9
+GATES = ("training", "greedy")
+#: Greedy gate defaults: sized so that a check at N = 3 costs ~15 s of a 2-core machine.
+EVAL_EVERY = 500
+EVAL_EPISODES = 20
 
 
 class CurriculumCallback(BaseCallback):
@@ -34,7 +53,15 @@ class CurriculumCallback(BaseCallback):
     :param min_stage_timesteps: env steps a stage lasts at least (0: as the paper). Setting it to
         the algorithm's ``exploration_timesteps`` makes a stage advance only once ε has decayed,
         so that the success that promotes it is the policy's rather than exploration's.
-    :param verbose: 1 prints each stage change.
+    :param gate: ``"training"`` (the paper's rule) or ``"greedy"`` (see the module docstring).
+    :param eval_env: a Gymnasium env (not vectorised) with the ``setter`` method, for greedy checks
+        (needed by the greedy gate; optional under the training gate, where they only log).
+    :param eval_every: env steps between greedy checks.
+    :param eval_episodes: episodes per greedy check.
+    :param eval_seed: seed of the greedy checks' scene stream.
+    :param eval_max_actions: a greedy-check episode still running after this many actions counts as
+        failed and is cut (None: the env's own limit). A looping policy then costs little to check.
+    :param verbose: 1 prints each stage change and greedy check.
     """
 
     def __init__(
@@ -45,9 +72,21 @@ class CurriculumCallback(BaseCallback):
         threshold: float = THRESHOLD,
         setter: str = "set_num_objects",
         min_stage_timesteps: int = 0,
+        gate: str = "training",
+        eval_env: gym.Env | None = None,
+        eval_every: int = EVAL_EVERY,
+        eval_episodes: int = EVAL_EPISODES,
+        eval_seed: int = 0,
+        eval_max_actions: int | None = None,
         verbose: int = 0,
     ) -> None:
         super().__init__(verbose)
+        if gate not in GATES:
+            raise ValueError(f"gate must be one of {GATES}, got {gate!r}")
+        if gate == "greedy" and eval_env is None:
+            raise ValueError('gate="greedy" needs an eval_env (a Gymnasium env like the training one)')
+        if eval_every < 1 or eval_episodes < 1:
+            raise ValueError(f"need eval_every >= 1 and eval_episodes >= 1, got {eval_every} and {eval_episodes}")
         if not 1 <= start_value <= max_value:
             raise ValueError(f"need 1 <= start_value <= max_value, got {start_value} and {max_value}")
         if window < 1 or not 0.0 <= threshold <= 1.0:
@@ -58,6 +97,15 @@ class CurriculumCallback(BaseCallback):
         self.threshold = threshold
         self.setter = setter
         self.min_stage_timesteps = int(min_stage_timesteps)
+        self.gate = gate
+        self.eval_env = eval_env
+        self.eval_every = int(eval_every)
+        self.eval_episodes = int(eval_episodes)
+        self.eval_rng = np.random.default_rng(eval_seed)
+        self.eval_max_actions = eval_max_actions
+        #: Greedy checks so far: [timestep, N, success rate].
+        self.greedy_history: list[list[float]] = []
+        self._last_check = 0
         self.value = start_value
         self.outcomes: deque[bool] = deque(maxlen=window)
         self.history: list[list[int]] = []
@@ -69,11 +117,15 @@ class CurriculumCallback(BaseCallback):
             self.value = int(state["value"])
             self.outcomes = deque((bool(x) for x in state["outcomes"]), maxlen=self.window)
             self.history = [[int(t), int(n)] for t, n in state["history"]]
+            self.greedy_history = [list(h) for h in state.get("greedy_history", [])]
+            if "eval_rng" in state:
+                self.eval_rng.bit_generator.state = state["eval_rng"]
         else:
             self.value = self.start_value
             self.outcomes.clear()
             self.history = [[self.model.num_timesteps, self.value]]
         self._stale = np.zeros(self.training_env.num_envs, dtype=bool)
+        self._last_check = self.greedy_history[-1][0] if self.greedy_history else self.model.num_timesteps
         self._save_state()
 
     def _on_training_start(self) -> None:
@@ -97,11 +149,26 @@ class CurriculumCallback(BaseCallback):
             elif "is_success" in info:
                 self.outcomes.append(bool(info["is_success"]))
                 changed = True
+        long_enough = self.model.num_timesteps - self.history[-1][0] >= self.min_stage_timesteps
+        if self.eval_env is not None and self.model.num_timesteps - self._last_check >= self.eval_every:
+            # greedy checks run whenever there is an eval env (a learning curve); they promote only
+            # under the greedy gate
+            self._last_check = self.model.num_timesteps
+            rate = self.greedy_success()
+            self.greedy_history.append([self.model.num_timesteps, self.value, rate])
+            self.logger.record("curriculum/greedy_success", rate)
+            if self.verbose:
+                print(f"curriculum: greedy success {rate:.0%} at N = {self.value}, step {self.model.num_timesteps}",
+                      flush=True)
+            if self.gate == "greedy" and self.value < self.max_value and rate >= self.threshold and long_enough:
+                self._advance()
+            changed = True
         if (
-            self.value < self.max_value
+            self.gate == "training"
+            and self.value < self.max_value
             and len(self.outcomes) == self.window
             and float(np.mean(self.outcomes)) > self.threshold
-            and self.model.num_timesteps - self.history[-1][0] >= self.min_stage_timesteps
+            and long_enough
         ):
             self._advance()
         self.logger.record("curriculum/num_objects", self.value)
@@ -121,6 +188,28 @@ class CurriculumCallback(BaseCallback):
         if self.verbose:
             print(f"curriculum: N = {self.value} at step {self.model.num_timesteps}")
 
+    def greedy_success(self) -> float:
+        """Success rate of the deterministic (masked) policy on ``eval_episodes`` fresh scenes at the current N."""
+        env = self.eval_env
+        assert env is not None
+        env.get_wrapper_attr(self.setter)(self.value)
+        has_masks = env.has_wrapper_attr("action_masks")
+        successes = 0
+        for _ in range(self.eval_episodes):
+            obs, info = env.reset(seed=int(self.eval_rng.integers(2**31)))
+            done, actions = False, 0
+            while not done:
+                masks = np.asarray(env.get_wrapper_attr("action_masks")()) if has_masks else None
+                action, _ = self.model.predict(obs, deterministic=True, action_masks=masks)  # type: ignore[call-arg]
+                obs, _, terminated, truncated, info = env.step(int(np.asarray(action).reshape(-1)[0]))
+                actions += 1
+                done = terminated or truncated
+                if not done and self.eval_max_actions is not None and actions >= self.eval_max_actions:
+                    info = {"is_success": False}
+                    done = True
+            successes += bool(info.get("is_success"))
+        return successes / self.eval_episodes
+
     @property
     def success_rate(self) -> float:
         """Success over the current stage's window so far (nan before the first counted episode)."""
@@ -131,5 +220,7 @@ class CurriculumCallback(BaseCallback):
             "value": self.value,
             "outcomes": list(self.outcomes),
             "history": [list(h) for h in self.history],
+            "greedy_history": [list(h) for h in self.greedy_history],
+            "eval_rng": self.eval_rng.bit_generator.state,
         }
         self.model.curriculum_state = state  # type: ignore[attr-defined]

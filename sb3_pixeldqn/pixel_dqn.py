@@ -1,25 +1,38 @@
 """`PixelDoubleDQN`: double deep Q-learning on pixel-wise Q-maps (§IV-D of the paper).
 
-Per gradient step, on a batch of transitions (s, a, r, s', done):
+Per gradient step, on a batch of transitions (s, a, r, s', done, mask'):
 
-- double-DQN target (the equation under Eq. 3): the online net picks the best action over all
-  maps and pixels of s', the target net values that action, ``y = r + (1 - done) * gamma * Q'``;
-  time-limit truncations are stored as not done, so they bootstrap;
+- double-DQN target (the equation under Eq. 3): the online net picks the best action of s' among
+  the actions its mask allows (all maps and pixels with ``masked=False``, the paper's argmax), the
+  target net values that action, ``y = r + (1 - done) * gamma * Q'``; time-limit truncations are
+  stored as not done, so they bootstrap;
 - loss (Eq. 3): Huber on ``Q(s, a) - y`` at the executed pixel of the executed map only, so every
-  other pixel and every other network gets exactly zero gradient;
-- Polyak averaging of the target net after every gradient step, ``θ' <- (1 - β) θ' + β θ``.
+  other pixel and every other network gets exactly zero gradient; plus, on demonstration rows, the
+  strict large-margin loss of SDQfD (mean hinge ``Q(s, a) + margin - Q(s, a_E)`` over every action
+  within the margin of the demonstrated one, `margin_loss`);
+- target update after every ``target_update_interval`` gradient steps, ``θ' <- (1 - τ) θ' + τ θ``
+  (paper: τ = β = 1e-3 every step; ``tau=1`` with an interval is a hard copy).
 
-Only what each term needs is computed: the online net on s for the executed map (with
-gradients), the online net on s' for all maps (argmax, no gradients), and the target net on s'
-for the selected map (no gradients).
+**Action masks** follow sb3-contrib's MaskablePPO: an env that offers ``action_masks()`` (a bool
+array of ``action_space.n``, True = allowed) gets every choice the algorithm makes restricted to
+it — exploratory and greedy actions while collecting, the argmax over s' (the buffer stores each
+next state's mask, packed to bits), and `predict` when given ``action_masks=``. An untrained pixel
+can then never win an argmax. ``masked=False`` keeps the paper's all-pixel argmax.
+
+**Demonstrations** (`collect_demonstrations`): any object with SB3's ``predict`` plays episodes in
+the training env; its transitions go to a store the replay ring never overwrites, and
+``demo_fraction`` of every batch is drawn from it with the margin loss.
+
+**Augmentation** (``augment=``): callables ``(obs, action, next_obs, next_mask, rng) -> (obs,
+action, next_obs, next_mask)`` applied to every sampled transition, each drawing its own element
+of a symmetry group of the task. The algorithm knows nothing of what they mean; an env package
+supplies them (`shelf_env.symmetry`).
 
 Exploration is ε-greedy with ε annealed linearly from ``exploration_initial_eps`` to
 ``exploration_final_eps`` over ``exploration_timesteps`` steps of the current *stage*;
-`restart_exploration` starts a new stage (the curriculum calls it when N grows). With
-``exploration_mask="<method>"`` an exploratory action is a map drawn uniformly among the maps
-with a useful pixel, then a pixel drawn uniformly among that map's useful pixels: the algorithm
-calls ``env.env_method("<method>")``, which must return a boolean array with one entry per action
-(an all-False mask falls back to uniform over all actions).
+`restart_exploration` starts a new stage (the curriculum calls it when N grows). A masked
+exploratory action is a map drawn uniformly among the maps with an allowed pixel, then one of
+its allowed pixels.
 """
 
 from __future__ import annotations
@@ -28,6 +41,8 @@ import os
 import pathlib
 import pickle
 import zipfile
+from collections import deque
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -41,11 +56,16 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import polyak_update
+from stable_baselines3.common.vec_env import VecEnv
 
-from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer
-from sb3_pixeldqn.policies import FCNPolicy, PixelQNetwork, describe_layout
+from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer, TransitionBatch, unchanged
+from sb3_pixeldqn.policies import FCNPolicy, PixelQNetwork, check_action_masks, describe_layout, masked_argmax
 
 SelfPixelDoubleDQN = TypeVar("SelfPixelDoubleDQN", bound="PixelDoubleDQN")
+#: ``(obs, action, next_obs, next_mask, rng) -> (obs, action, next_obs, next_mask)``: one symmetry
+#: of the task applied to one transition (numpy arrays, the action a Python int).
+Transform = Callable[[np.ndarray, int, np.ndarray, np.ndarray, np.random.Generator],
+                     tuple[np.ndarray, int, np.ndarray, np.ndarray]]
 
 # Defaults of the paper (§IV-D.2, §IV-D.3).
 LEARNING_RATE = 1e-4
@@ -57,30 +77,54 @@ EXPLORATION_FINAL_EPS = 0.01
 # Not given by the paper; sized for CPU budgets (a few thousand steps per curriculum stage).
 EXPLORATION_TIMESTEPS = 2_000
 BUFFER_SIZE = 50_000
+# Large-margin loss on demonstrations (SDQfD as in BulletArm / equivariant FCN-DQN).
+MARGIN = 0.1
+MARGIN_WEIGHT = 0.1
+DEMO_FRACTION = 0.25
+#: The info key an env may set at an episode's end with the mask of its final observation (the
+#: VecEnv has already reset when the algorithm could ask for it).
+FINAL_MASK_KEY = "action_mask"
+#: Steps over which ``rollout/noop_rate`` is averaged.
+NOOP_WINDOW = 200
+
+
+def get_action_masks(env: GymEnv) -> np.ndarray:
+    """The env's current action masks, as sb3-contrib's ``get_action_masks``: ``(n_envs, n)`` for a
+    VecEnv, ``(n,)`` for a Gymnasium env (through its wrappers)."""
+    if isinstance(env, VecEnv):
+        return np.stack(env.env_method("action_masks"))
+    return np.asarray(env.get_wrapper_attr("action_masks")())
 
 
 class PixelDoubleDQN(OffPolicyAlgorithm):
-    """Double DQN with a single-pixel Huber loss over the Q-maps of an `FCNPolicy`.
+    """Double DQN with a single-pixel Huber loss over the Q-maps of an `FCNPolicy` (see the module docstring).
 
     :param policy: ``"FCNPolicy"`` or a subclass of it.
     :param env: an env with a ``Box(0, 255, (C, H, W), uint8)`` observation and a
-        ``Discrete(n_maps * H * W)`` action space.
+        ``Discrete(n_maps * H * W)`` action space, optionally with ``action_masks()``.
     :param learning_rate: Adam learning rate (paper: 1e-4); weight decay is in ``policy_kwargs``
         (``optimizer_kwargs``, default 2e-5).
     :param buffer_size: replay buffer capacity in transitions.
-    :param learning_starts: steps of uniform (or masked) random actions before learning starts.
+    :param learning_starts: steps of random (or masked random) actions before learning starts.
     :param batch_size: transitions per gradient step (paper: 32).
-    :param tau: Polyak rate β of the target update after each gradient step (paper: 1e-3).
+    :param tau: target update rate: Polyak β (paper: 1e-3), or 1 for hard copies.
     :param gamma: discount (paper: 0.9).
     :param train_freq: env steps between training phases.
     :param gradient_steps: gradient steps per training phase.
-    :param replay_buffer_class: defaults to `HindsightRelabelReplayBuffer`.
+    :param target_update_interval: gradient steps between target updates (paper: 1).
+    :param replay_buffer_class: defaults to `HindsightRelabelReplayBuffer` (``relabel=``, ``noop=``
+        in ``replay_buffer_kwargs``).
     :param replay_buffer_kwargs: extra keyword arguments of the replay buffer.
     :param exploration_initial_eps: ε at the start of each stage (paper: 0.8).
     :param exploration_final_eps: ε at the end of the annealing (paper: 0.01).
     :param exploration_timesteps: env steps over which ε is annealed within a stage.
-    :param exploration_mask: name of an env method returning a boolean mask over actions to draw
-        exploratory actions from (None: uniform over all actions).
+    :param masked: restrict greedy collection and the argmax over s' to the env's ``action_masks()``.
+        None (default): if the env offers them; False: the paper's all-pixel argmax; True: require them.
+    :param masked_exploration: draw exploratory actions from the env's masks. None: same as ``masked``.
+    :param demo_fraction: share of each batch drawn from demonstrations, once there are any.
+    :param margin: the large-margin loss's margin between a demonstrated action and any other.
+    :param margin_weight: weight of the large-margin loss (0 disables it).
+    :param augment: symmetry transforms applied to every sampled transition (see `Transform`).
     :param max_grad_norm: gradient-norm clip (None: no clipping, as in the paper).
     :param stats_window_size: episodes averaged for the rollout logs.
     :param tensorboard_log: TensorBoard log folder (None: no TensorBoard).
@@ -107,12 +151,18 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         gamma: float = GAMMA,
         train_freq: int | tuple[int, str] = 1,
         gradient_steps: int = 1,
+        target_update_interval: int = 1,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         exploration_initial_eps: float = EXPLORATION_INITIAL_EPS,
         exploration_final_eps: float = EXPLORATION_FINAL_EPS,
         exploration_timesteps: int = EXPLORATION_TIMESTEPS,
-        exploration_mask: str | None = None,
+        masked: bool | None = None,
+        masked_exploration: bool | None = None,
+        demo_fraction: float = DEMO_FRACTION,
+        margin: float = MARGIN,
+        margin_weight: float = MARGIN_WEIGHT,
+        augment: Sequence[Transform] | None = None,
         max_grad_norm: float | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -151,16 +201,37 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             raise ValueError("exploration_initial_eps and exploration_final_eps must lie in [0, 1]")
         if exploration_timesteps < 1:
             raise ValueError(f"exploration_timesteps must be >= 1, got {exploration_timesteps}")
+        if target_update_interval < 1:
+            raise ValueError(f"target_update_interval must be >= 1, got {target_update_interval}")
+        if not 0.0 <= demo_fraction <= 1.0:
+            raise ValueError(f"demo_fraction must lie in [0, 1], got {demo_fraction}")
+        if margin < 0 or margin_weight < 0:
+            raise ValueError(f"margin and margin_weight must be >= 0, got {margin} and {margin_weight}")
+        augment = list(augment or [])
+        for transform in augment:
+            if not callable(transform):
+                raise ValueError(
+                    f"augment must hold callables (obs, action, next_obs, next_mask, rng); got {transform!r}"
+                )
         self.exploration_initial_eps = exploration_initial_eps
         self.exploration_final_eps = exploration_final_eps
         self.exploration_timesteps = int(exploration_timesteps)
-        self.exploration_mask = exploration_mask
+        self.target_update_interval = int(target_update_interval)
+        self.masked = masked
+        self.masked_exploration = masked_exploration
+        self.demo_fraction = float(demo_fraction)
+        self.margin = float(margin)
+        self.margin_weight = float(margin_weight)
+        self.augment = augment
         self.max_grad_norm = max_grad_norm
         #: Env steps since the current exploration stage began (saved with the model).
         self.stage_timesteps = 0
+        #: Env steps played by demonstration policies (not counted in ``num_timesteps``).
+        self.demo_timesteps = 0
         self.exploration_rate = exploration_initial_eps
         #: Written by `CurriculumCallback` so that training resumes at its stage after load.
         self.curriculum_state: dict[str, Any] | None = None
+        self._noop_history: deque[bool] = deque(maxlen=NOOP_WINDOW)
         if _init_setup_model:
             self._setup_model()
 
@@ -170,6 +241,9 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         self.q_net = self.policy.q_net
         self.q_net_target = self.policy.q_net_target
         self.exploration_rate = self._epsilon(self.stage_timesteps)
+        self._sample_rng = np.random.default_rng(self.seed)
+        if self.env is not None:
+            self._uses_masks()  # a clear error now if masked=True and the env has none
 
     def _epsilon(self, stage_timesteps: int) -> float:
         progress = min(1.0, stage_timesteps / self.exploration_timesteps)
@@ -184,16 +258,46 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         self.stage_timesteps += self.n_envs
         self.exploration_rate = self._epsilon(self.stage_timesteps)
         self.logger.record("rollout/exploration_rate", self.exploration_rate)
+        if self._noop_history:
+            self.logger.record("rollout/noop_rate", float(np.mean(self._noop_history)))
+
+    # ------------------------------------------------------------------ masks
+    def _env_has_masks(self) -> bool:
+        return self.env is not None and bool(self.env.has_attr("action_masks"))
+
+    def _uses_masks(self) -> bool:
+        """Whether greedy collection and the target argmax use the env's masks."""
+        if self.masked is None:
+            return self._env_has_masks()
+        if self.masked and self.env is not None and not self._env_has_masks():
+            raise ValueError("masked=True but the env has no action_masks() method; pass masked=False")
+        return bool(self.masked)
+
+    def _explores_masked(self) -> bool:
+        if self.masked_exploration is None:
+            return self._uses_masks()
+        if self.masked_exploration and not self._env_has_masks():
+            raise ValueError("masked_exploration=True but the env has no action_masks() method")
+        return bool(self.masked_exploration)
+
+    def _current_masks(self, indices: Sequence[int] | None = None) -> np.ndarray:
+        """``(k, n_actions)`` bool masks of the training envs (all, or ``indices``), checked."""
+        assert self.env is not None
+        masks = self.env.env_method("action_masks", indices=None if indices is None else [int(i) for i in indices])
+        return check_action_masks(np.stack([np.asarray(m) for m in masks]), int(self.action_space.n), len(masks))
 
     # ------------------------------------------------------------------ maths
-    def double_dqn_target(self, next_obs: th.Tensor, rewards: th.Tensor, dones: th.Tensor) -> th.Tensor:
-        """y = r + (1 - done) γ Q'(s', argmax_a' Q(s', a'))  (the equation under Eq. 3).
+    def double_dqn_target(self, next_obs: th.Tensor, rewards: th.Tensor, dones: th.Tensor,
+                          next_masks: th.Tensor | None = None) -> th.Tensor:
+        """y = r + (1 - done) γ Q'(s', argmax_{a' allowed} Q(s', a'))  (the equation under Eq. 3).
 
-        The online net chooses a' over all maps and pixels; the target net values a' on its map only.
+        The online net chooses a' over the maps and pixels ``next_masks`` allows (all if None); the
+        target net values a' on its map only.
         """
         with th.no_grad():
             next_images = self.policy.images(next_obs)
-            best = self.policy.all_q_maps(self.q_net, next_images).flatten(1).argmax(dim=1)
+            q_next = self.policy.all_q_maps(self.q_net, next_images).flatten(1)
+            best = masked_argmax(q_next, next_masks)
             next_q = self.policy.q_values_at(self.q_net_target, next_images, best)
             return rewards.reshape(-1) + (1.0 - dones.reshape(-1)) * self.gamma * next_q
 
@@ -202,57 +306,197 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         q = self.policy.q_values_at(self.q_net, self.policy.images(obs), actions)
         return F.smooth_l1_loss(q, targets)
 
+    def margin_loss(self, q_all: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """Strict large-margin loss of demonstrations (SDQfD), mean over rows ``(B, n_actions)``.
+
+        Every action whose value comes within ``margin`` of the demonstrated action's is a violator;
+        a row's loss is the mean over its violators of ``Q(s, a) + margin - Q(s, a_E)`` (0 without
+        violators). DQfD's ``max_a [Q(s, a) + margin * (a != a_E)] - Q(s, a_E)`` penalises only the
+        one largest action: on a map of thousands of pixels a flat Q-map is then a trap (the loss
+        sits at the margin and its gradient reaches one pixel at a time) — measured in
+        docs/learning.md, where the pick map of three runs went flat with it.
+        """
+        actions = actions.long().reshape(-1, 1)
+        q_demo = q_all.gather(1, actions)
+        excess = q_all + self.margin - q_demo  # > 0: within the margin of (or above) the demonstration
+        others = th.ones_like(q_all, dtype=th.bool).scatter_(1, actions, False)
+        violators = (excess > 0) & others
+        per_row = (excess * violators).sum(dim=1) / violators.sum(dim=1).clamp(min=1)
+        return per_row.mean()
+
+    def augmented(self, batch: TransitionBatch) -> TransitionBatch:
+        """Apply every transform of ``augment`` to every transition of ``batch``, checking what they return."""
+        if not self.augment:
+            return batch
+        obs, actions, next_obs, masks = (batch.observations.copy(), batch.actions.copy(),
+                                         batch.next_observations.copy(), batch.next_masks.copy())
+        n_actions = int(self.action_space.n)
+        for i in range(len(actions)):
+            o, a, no, m = obs[i], int(actions[i]), next_obs[i], masks[i]
+            for transform in self.augment:
+                o, a, no, m = transform(o, a, no, m, self._sample_rng)
+                if (np.shape(o) != obs.shape[1:] or np.shape(no) != obs.shape[1:] or np.shape(m) != masks.shape[1:]
+                        or np.asarray(o).dtype != obs.dtype or np.asarray(m).dtype != np.bool_
+                        or not 0 <= int(a) < n_actions):
+                    raise ValueError(
+                        f"augmentation {transform!r} changed a transition's layout: obs {np.shape(o)} "
+                        f"{np.asarray(o).dtype}, next_obs {np.shape(no)}, mask {np.shape(m)} {np.asarray(m).dtype}, "
+                        f"action {a}; expected obs {obs.shape[1:]} {obs.dtype}, mask {masks.shape[1:]} bool "
+                        f"and an action in [0, {n_actions})"
+                    )
+            obs[i], actions[i], next_obs[i], masks[i] = o, a, no, m
+        return batch._replace(observations=obs, actions=actions, next_observations=next_obs, next_masks=masks)
+
     def train(self, gradient_steps: int, batch_size: int = BATCH_SIZE) -> None:
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
-        losses = []
+        losses, margin_losses = [], []
+        use_masks = self.masked is not False
+        buffer = self.replay_buffer
+        assert isinstance(buffer, HindsightRelabelReplayBuffer), "PixelDoubleDQN needs a HindsightRelabelReplayBuffer"
         for _ in range(gradient_steps):
-            batch = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
-            targets = self.double_dqn_target(batch.next_observations, batch.rewards, batch.dones)
-            loss = self.pixel_loss(batch.observations, batch.actions, targets)
+            batch = self.augmented(buffer.sample_arrays(batch_size, self.demo_fraction, self._sample_rng))
+            obs = th.as_tensor(batch.observations, device=self.device)
+            actions = th.as_tensor(batch.actions, device=self.device)
+            masks = th.as_tensor(batch.next_masks, device=self.device) if use_masks else None
+            targets = self.double_dqn_target(th.as_tensor(batch.next_observations, device=self.device),
+                                             th.as_tensor(batch.rewards, device=self.device),
+                                             th.as_tensor(batch.dones, device=self.device), masks)
+            demo_rows = th.as_tensor(batch.is_demo, device=self.device) & (self.margin_weight > 0)
+            q, q_demo = self.policy.q_for_loss(self.policy.images(obs), actions, demo_rows)
+            loss = F.smooth_l1_loss(q, targets)
+            if demo_rows.any():
+                margin = self.margin_loss(q_demo, actions[demo_rows])
+                loss = loss + self.margin_weight * margin
+                margin_losses.append(margin.item())
             self.policy.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             if self.max_grad_norm is not None:
                 th.nn.utils.clip_grad_norm_(self.q_net.parameters(), self.max_grad_norm)
             self.policy.optimizer.step()
-            polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), self.tau)
+            self._n_updates += 1
+            if self._n_updates % self.target_update_interval == 0:
+                polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), self.tau)
             losses.append(loss.item())
-        self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/loss", float(np.mean(losses)))
+        if margin_losses:
+            self.logger.record("train/margin_loss", float(np.mean(margin_losses)))
 
-    # ------------------------------------------------------------- exploration
+    # ------------------------------------------------------------- collection
     def _sample_action(
         self, learning_starts: int, action_noise: ActionNoise | None = None, n_envs: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:
-        """ε-greedy per env; before ``learning_starts`` every action is exploratory."""
+        """ε-greedy per env; before ``learning_starts`` every action is exploratory. Both kinds are
+        drawn among the env's allowed actions when masks are in use."""
         if self.num_timesteps < learning_starts:
             explore = np.ones(n_envs, dtype=bool)
         else:
             explore = np.random.rand(n_envs) < self.exploration_rate
+        masks = self._current_masks() if (self._uses_masks() or self._explores_masked()) else None
         actions = np.zeros(n_envs, dtype=np.int64)
         if not explore.all():
-            greedy, _ = self.policy.predict(self._last_obs, deterministic=True)  # type: ignore[arg-type]
+            greedy, _ = self.policy.predict(self._last_obs, deterministic=True,  # type: ignore[arg-type]
+                                            action_masks=masks if self._uses_masks() else None)
             actions[~explore] = np.asarray(greedy).reshape(-1)[~explore]
         if explore.any():
-            actions[explore] = self._exploratory_actions(np.flatnonzero(explore))
+            actions[explore] = self._exploratory_actions(explore, masks if self._explores_masked() else None)
         return actions, actions
 
-    def _exploratory_actions(self, env_indices: np.ndarray) -> np.ndarray:
+    def _exploratory_actions(self, explore: np.ndarray, masks: np.ndarray | None) -> np.ndarray:
         n_actions = int(self.action_space.n)  # type: ignore[attr-defined]
-        if self.exploration_mask is None:
-            return np.random.randint(n_actions, size=len(env_indices))
-        masks = self.env.env_method(self.exploration_mask, indices=[int(i) for i in env_indices])  # type: ignore[union-attr]
-        actions = []
-        for mask in masks:
-            mask = np.asarray(mask, dtype=bool).reshape(-1)
-            if mask.shape != (n_actions,):
+        if masks is None:
+            return np.random.randint(n_actions, size=int(explore.sum()))
+        return np.array([draw_masked_action(masks[i], self.policy.n_maps, np.random) for i in np.flatnonzero(explore)],
+                        dtype=np.int64)
+
+    def _next_masks(self, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray | None:
+        """Masks of the states each env's step reached (for the buffer), or None when unused.
+
+        For an env whose episode ended, the VecEnv has already reset; its final mask is read from
+        ``info["action_mask"]`` when the env provides it, else every action counts as allowed
+        (that matters only for time-limit truncations: terminal transitions bootstrap nothing).
+        """
+        if not self._uses_masks():
+            return None
+        masks = self._current_masks()
+        for i, done in enumerate(dones):
+            if done:
+                final = infos[i].get(FINAL_MASK_KEY)
+                masks[i] = True if final is None else check_action_masks(final, masks.shape[1], 1)[0]
+        return masks
+
+    def _store_transition(
+        self,
+        replay_buffer: ReplayBuffer,
+        buffer_action: np.ndarray,
+        new_obs: np.ndarray | dict[str, np.ndarray],
+        reward: np.ndarray,
+        dones: np.ndarray,
+        infos: list[dict[str, Any]],
+    ) -> None:
+        """SB3's store (terminal observations of auto-reset envs put back), plus the next-state masks."""
+        next_obs = np.array(new_obs, copy=True)
+        for i, done in enumerate(dones):
+            if done and infos[i].get("terminal_observation") is not None:
+                next_obs[i] = infos[i]["terminal_observation"]
+        last_obs = np.asarray(self._last_obs)
+        self._noop_history.extend(unchanged(last_obs[i], next_obs[i]) for i in range(len(dones)))
+        masks = self._next_masks(dones, infos)
+        if isinstance(replay_buffer, HindsightRelabelReplayBuffer):
+            replay_buffer.add(last_obs, next_obs, buffer_action, reward, dones, infos, next_action_masks=masks)
+        else:
+            replay_buffer.add(last_obs, next_obs, buffer_action, reward, dones, infos)
+        self._last_obs = new_obs  # type: ignore[assignment]
+        self._last_original_obs = new_obs  # type: ignore[assignment]
+
+    def collect_demonstrations(self, demo_policy: Any, n_steps: int, capacity: int | None = None,
+                               progress: Callable[[int], None] | None = None) -> dict[str, float]:
+        """Play ``demo_policy`` (anything with SB3's ``predict(obs, deterministic=True)``, e.g. the
+        shelf heuristics) in the training env for ``n_steps`` steps of every sub-env and store its
+        transitions as demonstrations: kept for the whole run, drawn as ``demo_fraction`` of each
+        batch and trained with the margin loss. Episodes are cut where the steps run out; the env
+        is reset before and after. Returns episodes, successes and steps played.
+        """
+        if self.env is None:
+            raise ValueError("collect_demonstrations needs the model's env; load the model with env=...")
+        if n_steps < 1:
+            raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+        space = getattr(demo_policy, "action_space", None)
+        if space is not None and space != self.action_space:
+            raise ValueError(
+                f"demonstration policy {type(demo_policy).__name__} acts in {space} but the model's action "
+                f"layout is {self.action_space} ({describe_layout(self.policy.maps)}): build it on the same env layout"
+            )
+        buffer = self.replay_buffer
+        assert isinstance(buffer, HindsightRelabelReplayBuffer), "demonstrations need a HindsightRelabelReplayBuffer"
+        env = self.env
+        n_actions = int(self.action_space.n)
+        obs = env.reset()
+        episodes = successes = 0
+        for step in range(n_steps):
+            actions = np.asarray(demo_policy.predict(obs, deterministic=True)[0]).reshape(-1).astype(np.int64)
+            if actions.shape != (env.num_envs,) or not ((actions >= 0) & (actions < n_actions)).all():
                 raise ValueError(
-                    f"env method {self.exploration_mask!r} returned a mask of {mask.size} entries; "
-                    f"expected one per action ({n_actions})"
+                    f"demonstration policy {type(demo_policy).__name__} returned actions {actions.tolist()}; "
+                    f"expected {env.num_envs} action(s) in [0, {n_actions})"
                 )
-            actions.append(draw_masked_action(mask, self.policy.n_maps, np.random))
-        return np.asarray(actions, dtype=np.int64)
+            new_obs, rewards, dones, infos = env.step(actions)
+            next_obs = np.array(new_obs, copy=True)
+            for i, done in enumerate(dones):
+                if done:
+                    next_obs[i] = infos[i]["terminal_observation"]
+                    episodes += 1
+                    successes += bool(infos[i].get("is_success"))
+            buffer.add_demonstration(obs, next_obs, actions, rewards, dones, infos, self._next_masks(dones, infos),
+                                     capacity=capacity or 2 * n_steps * env.num_envs)
+            obs = new_obs
+            if progress is not None:
+                progress(step + 1)
+        self.demo_timesteps += n_steps * env.num_envs
+        self._last_obs = env.reset()  # type: ignore[assignment]
+        self._last_episode_starts = np.ones(env.num_envs, dtype=bool)
+        return {"episodes": episodes, "successes": successes, "steps": n_steps * env.num_envs}
 
     def predict(
         self,
@@ -260,14 +504,28 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         state: tuple[np.ndarray, ...] | None = None,
         episode_start: np.ndarray | None = None,
         deterministic: bool = False,
+        action_masks: np.ndarray | None = None,
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
-        """Greedy action (Eq. 1) if ``deterministic``, else ε-greedy with uniform exploration (as SB3's DQN)."""
-        action, state = self.policy.predict(observation, state, episode_start, deterministic=True)
+        """Greedy action (Eq. 1) if ``deterministic``, else ε-greedy (as SB3's DQN).
+
+        ``action_masks`` is sb3-contrib's MaskablePPO convention: a bool array of
+        ``action_space.n`` per observation, True = allowed, e.g. ``env.action_masks()`` or
+        `get_action_masks` (env); the greedy and the exploratory action are then drawn among allowed
+        actions only. When none is passed, nothing is masked — even if the model's env offers
+        masks — exactly as MaskablePPO does: ``predict`` cannot know that ``observation`` is that
+        env's current state. Pass the masks to act as the policy was trained to.
+        """
+        action, state = self.policy.predict(observation, state, episode_start, deterministic=True,
+                                            action_masks=action_masks)
         if not deterministic:
             action = np.array(action, copy=True)
             flat = action.reshape(-1)
             explore = np.random.rand(flat.size) < self.exploration_rate
-            flat[explore] = np.random.randint(int(self.action_space.n), size=int(explore.sum()))  # type: ignore[attr-defined]
+            if action_masks is None:
+                flat[explore] = np.random.randint(int(self.action_space.n), size=int(explore.sum()))  # type: ignore[attr-defined]
+            else:
+                masks = check_action_masks(action_masks, int(self.action_space.n), flat.size)
+                flat[explore] = self._exploratory_actions(explore, masks)
         return action, state
 
     # ------------------------------------------------------------- save / load
@@ -290,7 +548,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         )
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "q_net", "q_net_target"]
+        return [*super()._excluded_save_params(), "q_net", "q_net_target", "_sample_rng", "_noop_history"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.optimizer"], []
@@ -324,7 +582,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         if isinstance(path, (str, pathlib.Path)) and not _with_suffix(path, ".zip").is_file():
             raise FileNotFoundError(f"no {cls.__name__} checkpoint at {path}")
         try:
-            return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+            model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
         except (zipfile.BadZipFile, EOFError, KeyError, AssertionError, pickle.UnpicklingError, RuntimeError) as err:
             raise ValueError(
                 f"{path} is not a readable {cls.__name__} checkpoint: {type(err).__name__}: {err}"
@@ -340,6 +598,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
                 f"{(data or {}).get('observation_space')}; the env has {env.observation_space if env else '?'} "
                 f"and {env.action_space if env else '?'}."
             ) from err
+        return model
 
 
 def draw_masked_action(mask: np.ndarray, n_maps: int, rng: Any) -> int:

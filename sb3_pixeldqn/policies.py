@@ -203,9 +203,58 @@ class FCNPolicy(BasePolicy):
     def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
         return self._predict(obs, deterministic=deterministic)
 
-    def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> th.Tensor:
-        q = self.all_q_maps(self.q_net, self.images(observation))
-        return q.flatten(1).argmax(dim=1)
+    def _predict(
+        self, observation: PyTorchObs, deterministic: bool = True, action_masks: th.Tensor | None = None
+    ) -> th.Tensor:
+        q = self.all_q_maps(self.q_net, self.images(observation)).flatten(1)
+        return masked_argmax(q, action_masks)
+
+    def predict(  # type: ignore[override]
+        self,
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+        action_masks: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        """Greedy action (Eq. 1) for one observation ``(C, H, W)`` or a batch ``(B, C, H, W)``.
+
+        ``action_masks`` (sb3-contrib's convention): a bool array of ``action_space.n`` (or
+        ``(B, action_space.n)``), True = allowed; the argmax is taken over allowed actions only.
+        None: over every map and pixel, as in the paper.
+        """
+        self.set_training_mode(False)
+        obs_tensor, vectorized_env = self.obs_to_tensor(observation)
+        masks = None
+        if action_masks is not None:
+            masks = th.as_tensor(check_action_masks(action_masks, int(self.action_space.n), obs_tensor.shape[0]),
+                                 device=self.device)
+        with th.no_grad():
+            actions = self._predict(obs_tensor, deterministic=deterministic, action_masks=masks)
+        actions = actions.cpu().numpy().reshape((-1,))
+        if not vectorized_env:
+            actions = actions.squeeze(axis=0)
+        return actions, state
+
+    def q_for_loss(
+        self, images: th.Tensor, actions: th.Tensor, full_rows: th.Tensor
+    ) -> tuple[th.Tensor, th.Tensor]:
+        """Online Q of each sample's executed action, with gradients, and the full Q-maps
+        ``(n_full, n_maps * H * W)`` of the rows in ``full_rows`` (bool), also with gradients.
+
+        Rows without ``full_rows`` run only their executed map (Eq. 3); the others run every map
+        once, and their executed value is read from those maps (the large-margin loss of
+        demonstrations needs them all).
+        """
+        q = images.new_empty(images.shape[0])
+        partial = ~full_rows
+        if partial.any():
+            q[partial] = self.q_values_at(self.q_net, images[partial], actions[partial])
+        full = images.new_empty((0, int(self.action_space.n)))
+        if full_rows.any():
+            full = self.q_net.q_maps(images[full_rows]).flatten(1)
+            q[full_rows] = full.gather(1, actions[full_rows].long().reshape(-1, 1)).squeeze(1)
+        return q, full
 
     def set_training_mode(self, mode: bool) -> None:
         self.q_net.train(mode)
@@ -223,6 +272,37 @@ class FCNPolicy(BasePolicy):
             optimizer_kwargs=self.optimizer_kwargs,
         )
         return data
+
+
+def masked_argmax(q: th.Tensor, action_masks: th.Tensor | None) -> th.Tensor:
+    """Row-wise argmax of ``q`` ``(B, n)`` over the actions ``action_masks`` allows (all if None).
+
+    A row whose mask allows nothing falls back to all actions; callers that take masks from users
+    reject such masks before (`check_action_masks`).
+    """
+    if action_masks is None:
+        return q.argmax(dim=1)
+    masks = action_masks.reshape(q.shape).to(dtype=th.bool, device=q.device)
+    masks = masks | ~masks.any(dim=1, keepdim=True)
+    return q.masked_fill(~masks, -th.inf).argmax(dim=1)
+
+
+def check_action_masks(action_masks: Any, n_actions: int, batch: int) -> np.ndarray:
+    """``action_masks`` as a ``(batch, n_actions)`` bool array, or a ValueError that names the problem:
+    wrong dtype (it must be bool, True = allowed), wrong length, or a row that allows no action."""
+    masks = np.asarray(action_masks)
+    if masks.dtype != np.bool_:
+        raise ValueError(f"action_masks must be a bool array (True = allowed), got dtype {masks.dtype}")
+    if masks.size != batch * n_actions:
+        raise ValueError(
+            f"action_masks has shape {masks.shape}; expected ({n_actions},) per observation "
+            f"({batch} observation(s), action_space.n = {n_actions})"
+        )
+    masks = masks.reshape(batch, n_actions)
+    empty = np.flatnonzero(~masks.any(axis=1))
+    if empty.size:
+        raise ValueError(f"action_masks allows no action for observation(s) {empty.tolist()}")
+    return masks
 
 
 def check_spaces(observation_space: spaces.Space, action_space: spaces.Space, maps: MapLayout) -> None:

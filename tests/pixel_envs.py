@@ -64,11 +64,9 @@ class FindTheSquareEnv(gym.Env):
         row, col = divmod(rest, w)
         return m == self.good_map and abs(row - self._centre[0]) <= 1 and abs(col - self._centre[1]) <= 1
 
-    def exploration_mask(self) -> np.ndarray:
-        mask = np.zeros(self.action_space.n, dtype=bool)
-        _, h, w = self.shape
-        mask[self.good_map * h * w:(self.good_map + 1) * h * w] = self._obs()[0].reshape(-1) > 0
-        return mask
+    def action_masks(self) -> np.ndarray:
+        """sb3-contrib's convention: the square's pixels on every map (which map pays must be learned)."""
+        return np.tile(self._obs()[0].reshape(-1) > 0, self.n_maps)
 
     def step(self, action):
         self._t += 1

@@ -83,24 +83,30 @@ def test_pickle_keeps_only_the_filled_part_and_round_trips():
 def test_save_and_load_replay_buffer_through_the_algorithm(tmp_path):
     env = make_vec_env(lambda: FindTheSquareEnv(relabel=True), n_envs=2)
     model = PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0)], widths=(4, 8, 8)),
-                           learning_starts=100, buffer_size=200, seed=0)
+                           learning_starts=100, buffer_size=200, seed=0, replay_buffer_kwargs=dict(relabel="all"),
+                           masked_exploration=False)
     model.learn(20)
     buf = model.replay_buffer
     assert buf.n_relabelled > 0 and buf.pos == 20 + buf.n_relabelled
+    # next-state masks were stored (the env offers action_masks): the 9 square pixels, or all 240
+    # actions at an episode's end, where this env gives no info["action_mask"]; twins included
+    stored = np.unpackbits(buf.next_masks[: buf.pos], axis=1, count=12 * 20).astype(bool).sum(axis=1)
+    assert set(stored) == {9, 240}
     model.save_replay_buffer(tmp_path / "replay")
     assert (tmp_path / "replay.pkl").exists() and not list(tmp_path.glob(".*partial"))
     other = PixelDoubleDQN("FCNPolicy", FindTheSquareEnv(), policy_kwargs=dict(maps=[("pick", 0)], widths=(4, 8, 8)))
     other.load_replay_buffer(tmp_path / "replay.pkl")
-    for name in ("observations", "next_observations", "actions", "rewards", "dones", "timeouts"):
+    for name in ("observations", "next_observations", "actions", "rewards", "dones", "timeouts", "next_masks"):
         assert np.array_equal(getattr(other.replay_buffer, name), getattr(buf, name)), name
     assert other.replay_buffer.pos == buf.pos
     # the env is never part of what is pickled
     assert b"FindTheSquareEnv" not in (tmp_path / "replay.pkl").read_bytes()
 
 
-def test_fifty_thousand_shelf_transitions_fit_in_4_gb():
+def test_fifty_thousand_shelf_transitions_with_masks_fit_in_4_1_gb():
     space = gym.spaces.Box(0, 255, (4, 80, 120), dtype=np.uint8)
     buf = HindsightRelabelReplayBuffer(50_000, space, gym.spaces.Discrete(3 * 80 * 120), device="cpu")
     total = sum(getattr(buf, n).nbytes for n in ("observations", "next_observations", "actions", "rewards",
-                                                   "dones", "timeouts"))
-    assert total <= 4e9
+                                                   "dones", "timeouts", "next_masks"))
+    assert buf.next_masks.nbytes == 50_000 * 3 * 80 * 120 // 8  # one bit per action
+    assert total <= 4.1e9
