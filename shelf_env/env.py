@@ -21,6 +21,10 @@ at rest 1 s after the motion), 0 if it reaches the sorted state, -1 otherwise. `
 sorted or invalid, ``truncated`` after ``max_actions`` actions. See `shelf_env.world` for the
 exact definitions of inside, at rest and in-region.
 
+Action masks (sb3-contrib's convention): `ShelfSortEnv.action_masks` marks the picks and pushes
+that can touch a visible object; at an episode's end ``info["action_mask"]`` holds the mask of the
+final observation (a VecEnv resets before anyone could ask for it).
+
 Hindsight protocol (§IV-D.3, read by `sb3_pixeldqn.HindsightRelabelReplayBuffer`): when a step
 ends valid with every object inside some target region but not all in their own,
 ``info["relabelled"]`` holds ``{"obs", "next_obs", "reward", "terminated"}``: both observations
@@ -273,18 +277,24 @@ class ShelfSortEnv(gym.Env):
                 "reward": params.REWARD_SORTED,
                 "terminated": True,
             }
+        if terminated or truncated:  # a VecEnv resets before the learner can ask for the final mask
+            info["action_mask"] = self.action_masks()
         return self._obs.copy(), float(reward), bool(terminated), bool(truncated), info
 
-    def exploration_mask(self) -> np.ndarray:
-        """Actions worth exploring in the current observation, a bool array of ``action_space.n``.
+    def action_masks(self) -> np.ndarray:
+        """The actions allowed in the current observation: a bool array of ``action_space.n``,
+        True = allowed (sb3-contrib's MaskablePPO convention, used by `sb3_pixeldqn.PixelDoubleDQN`
+        for exploration, greedy actions and its double-DQN target).
 
-        For `sb3_pixeldqn.PixelDoubleDQN(exploration_mask="exploration_mask")`: picks on a visible
-        object cell, and pushes whose blade (one row either side of the start cell) meets a visible
-        object cell within the push length in the push direction. Uniform pixels would mostly pick
-        or push empty space (an object covers ~1 % of the map). Uses only the observation.
+        Allowed: a pick on a visible object cell; a push whose blade (one row either side of the
+        start cell) meets a visible object cell within the push length in the push direction.
+        Everything else — picking or pushing empty floor, occluded cells or walls — cannot move an
+        object, so it can only waste an action (an object covers ~1 % of the map). It reads only
+        what the observation shows: the visible object cells. It is mirror-symmetric across the
+        cabinet's width (push-left at col c <-> push-right at col W-1-c) and blind to classes.
         """
         if self._semantic is None:
-            raise RuntimeError("call reset() before exploration_mask()")
+            raise RuntimeError("call reset() before action_masks()")
         occupied = self._semantic[0] >= 0
         band = occupied.copy()  # the blade is ~1 cm (2 cells) deep: count neighbouring rows
         band[1:] |= occupied[:-1]

@@ -16,6 +16,7 @@ name before any work starts.
 from __future__ import annotations
 
 import csv
+import inspect
 import json
 import math
 import os
@@ -30,6 +31,9 @@ from shelf_env import params
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
 
 HEURISTICS = {"h-d": DistanceHeuristic, "h-a": AccessibilityHeuristic}
+#: Evaluation seed of the held-out scenes behind learning claims (docs/learning.md): no training
+#: run, greedy curriculum check or tuning probe draws scenes from it.
+HELDOUT_SEED = 1000
 NAMED_POLICIES = (*HEURISTICS, "random")
 N_RANGE = (3, 14)
 
@@ -47,6 +51,7 @@ class EpisodeRecord:
     actions: int
     num_unsorted_initial: int
     fell: bool
+    noops: int = 0  # actions that left the observation unchanged
 
 
 def scene_seed(seed: int, num_objects: int, run: int) -> int:
@@ -73,6 +78,20 @@ def checkpoint_primitives(path: str | os.PathLike) -> tuple[str, ...]:
     maps = (data or {}).get("policy_kwargs", {}).get("maps")
     names = {name for name, _ in maps} if maps else {"pick", "push"}
     return ("pick", "push") if "push" in names else ("pick",)
+
+
+def checkpoint_pixel_size(path: str | os.PathLike) -> float:
+    """The heightmap cell size (m) a PixelDoubleDQN checkpoint was trained at, from its observation width."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    data, _, _ = load_from_zip_file(pathlib.Path(path), load_data=True, device="cpu")
+    cols = int((data or {})["observation_space"].shape[2])
+    return params.CABINET_WIDTH / cols
+
+
+def policy_pixel_size(policy: str) -> float:
+    """Cell size of the env a policy acts in: the checkpoint's, or the env default for named policies."""
+    return params.PIXEL_SIZE if policy in NAMED_POLICIES else checkpoint_pixel_size(policy)
 
 
 def check_policy(policy: str, primitives: tuple[str, ...] | None = None) -> tuple[str, ...]:
@@ -105,18 +124,35 @@ def make_policy(policy: str, env: gym.Env, seed: int = 0) -> Any:
     return PixelDoubleDQN.load(policy, env=env, device="cpu")
 
 
+def takes_action_masks(policy: Any) -> bool:
+    """Whether ``policy.predict`` accepts sb3-contrib's ``action_masks=`` (a PixelDoubleDQN does)."""
+    try:
+        return "action_masks" in inspect.signature(policy.predict).parameters
+    except (TypeError, ValueError):
+        return False
+
+
 def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = params.MAX_ACTIONS) -> dict:
-    """Roll out ``policy`` greedily from the scene of ``reset_seed``; success needs < ``max_actions`` actions."""
+    """Roll out ``policy`` greedily from the scene of ``reset_seed``; success needs < ``max_actions`` actions.
+
+    A policy whose ``predict`` takes ``action_masks`` gets the env's masks at every step, as a
+    MaskablePPO evaluation does; the heuristics choose among object cells by construction.
+    """
     obs, info = env.reset(seed=reset_seed)
     unsorted = info["num_unsorted_initial"]
+    masked = takes_action_masks(policy)
+    noops = 0
     while True:
-        action, _ = policy.predict(obs, deterministic=True)
-        obs, _, terminated, truncated, info = env.step(int(np.asarray(action).reshape(-1)[0]))
+        kwargs = {"action_masks": env.unwrapped.action_masks()} if masked else {}
+        action, _ = policy.predict(obs, deterministic=True, **kwargs)
+        next_obs, _, terminated, truncated, info = env.step(int(np.asarray(action).reshape(-1)[0]))
+        noops += bool(np.array_equal(next_obs, obs))
+        obs = next_obs
         if terminated or truncated:
             break
     actions = info["action_count"]
     return {"success": bool(info["is_success"]) and actions < max_actions, "actions": int(actions),
-            "num_unsorted_initial": int(unsorted), "fell": bool(info["fell"])}
+            "num_unsorted_initial": int(unsorted), "fell": bool(info["fell"]), "noops": noops}
 
 
 def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_set: str = "ycb",
@@ -124,7 +160,7 @@ def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_se
     """All ``runs`` episodes of one (policy, N, seed) cell."""
     primitives = check_policy(policy, primitives)
     env = gym.make("ShelfSort-v0", num_objects=num_objects, object_set=object_set, primitives=primitives,
-                   max_actions=params.MAX_ACTIONS)
+                   max_actions=params.MAX_ACTIONS, pixel_size=policy_pixel_size(policy))
     try:
         agent = make_policy(policy, env, seed=scene_seed(seed, num_objects, 10**6))  # its own stream
         return [
@@ -137,6 +173,18 @@ def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_se
 
 
 # ---------------------------------------------------------------- metrics
+def episode_summary(records: list[EpisodeRecord]) -> dict[str, float]:
+    """Sorted count, SR (%), mean actions per success, share of unchanged-observation actions, falls."""
+    ok = [r for r in records if r.success]
+    actions = sum(r.actions for r in records)
+    return {
+        "scenes": len(records), "sorted": len(ok), "sr": 100.0 * len(ok) / len(records) if records else math.nan,
+        "actions_per_success": float(np.mean([r.actions for r in ok])) if ok else math.nan,
+        "noop_share": sum(r.noops for r in records) / max(1, actions),
+        "fell": sum(r.fell for r in records),
+    }
+
+
 def seed_metrics(records: list[EpisodeRecord]) -> dict[str, float]:
     """SR (%), AE and mAE of one seed's runs (AE, mAE over successful runs; nan if none)."""
     ok = [r for r in records if r.success]
@@ -162,6 +210,8 @@ def summarize(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
             row[f"{key}_mean"] = float(finite.mean()) if finite.size else math.nan
             row[f"{key}_std"] = float(finite.std()) if finite.size else math.nan
         row["fell_rate"] = float(np.mean([r.fell for rs in by_seed.values() for r in rs]))
+        all_runs = [r for rs in by_seed.values() for r in rs]
+        row["noop_share"] = sum(r.noops for r in all_runs) / max(1, sum(r.actions for r in all_runs))
         rows.append(row)
     return rows
 

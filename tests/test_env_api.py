@@ -129,9 +129,9 @@ def test_thousand_resets_keep_body_count_constant():
     _body_count_stays_constant(1000)
 
 
-def test_exploration_mask_marks_object_cells_and_pushes_that_reach_them(env):
+def test_action_masks_mark_object_cells_and_pushes_that_reach_them(env):
     env.set_scene([(box(0.06, 0.06, 0.08), 0, 0.25, 0.0, 0.0)], REGIONS)
-    mask = env.exploration_mask().reshape(3, env.rows, env.cols)
+    mask = env.action_masks().reshape(3, env.rows, env.cols)
     assert mask.dtype == bool and mask.size == env.action_space.n
     seen = env._semantic[0] >= 0
     assert np.array_equal(mask[0], seen)

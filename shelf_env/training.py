@@ -1,0 +1,190 @@
+"""Training configurations of `PixelDoubleDQN` on `ShelfSort-v0`, in one place.
+
+A `TrainConfig` holds every lever of the learning recipe (docs/learning.md). Three presets:
+
+- ``"recipe"``: what docs/learning.md measured to learn on two CPU cores — action masks everywhere,
+  H-a demonstrations with the large-margin loss, mirror and class-permutation augmentation, a
+  penalty on unchanged-observation steps, hindsight relabelling of steps that changed something,
+  hard target copies, 1 cm cells, a curriculum gated on the greedy policy;
+- ``"paper"``: the paper's values (§IV-D): lr 1e-4, Polyak β = 1e-3 every step, all-pixel
+  argmax, uniform exploration, 5 mm cells, the ε-greedy 50-episode curriculum rule, no
+  demonstrations or augmentation, every relabelled transition kept;
+- ``"issue3"``: the loop of the first CPU runs (paper values with lr 1e-3 and masked exploration
+  only), the baseline of the ablation.
+
+`make_model` and `make_curriculum` build the algorithm and its callback from a config;
+``examples/train.py`` and ``examples/ablation.py`` use them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+from stable_baselines3.common.vec_env import VecEnv
+
+from shelf_env import params
+from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
+from shelf_env.symmetry import MirrorWidth, PermuteClasses
+
+DEMO_POLICIES = {"h-a": AccessibilityHeuristic, "h-d": DistanceHeuristic}
+
+
+@dataclass
+class TrainConfig:
+    """Every lever of a training run (names as in docs/learning.md)."""
+
+    primitives: tuple[str, ...] = ("pick", "push")
+    pixel_size: float = 0.01
+    object_set: str = "train"
+    # lever 1: one action mask everywhere (False: the paper's all-pixel argmax)
+    masked: bool = True
+    masked_exploration: bool = True
+    # lever 2: demonstrations
+    demo_policy: str | None = "h-a"
+    demo_steps: int = 400
+    demo_objects: tuple[int, ...] = (3,)  # N of the demonstration episodes, steps split evenly
+    demo_fraction: float = 0.5
+    margin: float = 0.1
+    margin_weight: float = 1.0
+    # lever 3: exact-symmetry augmentation
+    augment: tuple[str, ...] = ("mirror", "permute")
+    # lever 4: unchanged-observation steps ("keep", "penalty", "terminal")
+    noop: str = "penalty"
+    noop_penalty: float = 1.0
+    # lever 5: target and optimiser
+    learning_rate: float = 1e-3
+    tau: float = 1.0
+    target_update_interval: int = 100
+    batch_size: int = 32
+    gradient_steps: int = 1
+    gamma: float = 0.9
+    # exploration
+    exploration_initial_eps: float = 0.5
+    exploration_final_eps: float = 0.01
+    exploration_timesteps: int = 1500
+    learning_starts: int = 50
+    buffer_size: int = 20_000
+    widths: tuple[int, int, int] = (16, 32, 64)
+    # lever 7: curriculum gate ("greedy" or "training") and its stages
+    gate: str = "greedy"
+    start_objects: int = 1
+    max_objects: int = 8
+    min_stage_timesteps: int = 0
+    eval_every: int = 500
+    eval_episodes: int = 20
+    eval_max_actions: int | None = 20
+    # lever 8: hindsight relabelling ("changed", "all", "off")
+    relabel: str = "changed"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def replace(self, **changes: Any) -> TrainConfig:
+        unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
+        if unknown:
+            raise ValueError(f"unknown TrainConfig fields {sorted(unknown)}")
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"unknown TrainConfig fields {sorted(unknown)}")
+        data = dict(data)
+        for key in ("primitives", "augment", "widths", "demo_objects"):
+            if key in data:
+                data[key] = tuple(data[key])
+        return cls(**data)
+
+
+PRESETS: dict[str, TrainConfig] = {
+    "recipe": TrainConfig(),
+    "paper": TrainConfig(
+        pixel_size=params.PIXEL_SIZE, masked=False, masked_exploration=False, demo_policy=None, augment=(),
+        demo_fraction=0.0, margin_weight=0.0,
+        noop="keep", learning_rate=1e-4, tau=1e-3, target_update_interval=1, exploration_initial_eps=0.8,
+        exploration_timesteps=2000, learning_starts=100, buffer_size=50_000, gate="training", relabel="all",
+    ),
+    "issue3": TrainConfig(
+        pixel_size=params.PIXEL_SIZE, masked=False, masked_exploration=True, demo_policy=None, augment=(),
+        demo_fraction=0.0, margin_weight=0.0,
+        noop="keep", learning_rate=1e-3, tau=1e-3, target_update_interval=1, exploration_initial_eps=0.8,
+        exploration_timesteps=1000, learning_starts=100, buffer_size=50_000, gate="training",
+        min_stage_timesteps=1000, relabel="all",
+    ),
+}
+
+
+def make_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any) -> gym.Env:
+    """A ShelfSort-v0 env with the config's layout, cell size and object set."""
+    return gym.make("ShelfSort-v0", num_objects=num_objects or config.start_objects, object_set=config.object_set,
+                    primitives=config.primitives, pixel_size=config.pixel_size, **kwargs)
+
+
+def augmentations(config: TrainConfig, env: gym.Env) -> list[Any]:
+    known = {"mirror": lambda: MirrorWidth.for_env(env), "permute": PermuteClasses}
+    unknown = [a for a in config.augment if a not in known]
+    if unknown:
+        raise ValueError(f"unknown augmentations {unknown}; known: {sorted(known)}")
+    return [known[a]() for a in config.augment]
+
+
+def make_model(config: TrainConfig, env: gym.Env | VecEnv, seed: int = 0, tensorboard_log: str | None = None,
+               device: str = "auto") -> Any:
+    """A fresh `PixelDoubleDQN` for ``config`` on ``env``."""
+    from sb3_pixeldqn import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, PixelDoubleDQN
+
+    probe = env if not isinstance(env, VecEnv) else None
+    maps = PICK_AND_PUSH_MAPS if "push" in config.primitives else PICK_ONLY_MAPS
+    return PixelDoubleDQN(
+        "FCNPolicy",
+        env,
+        learning_rate=config.learning_rate,
+        buffer_size=config.buffer_size,
+        learning_starts=config.learning_starts,
+        batch_size=config.batch_size,
+        tau=config.tau,
+        gamma=config.gamma,
+        gradient_steps=config.gradient_steps,
+        target_update_interval=config.target_update_interval,
+        replay_buffer_kwargs=dict(relabel=config.relabel, noop=config.noop, noop_penalty=config.noop_penalty),
+        exploration_initial_eps=config.exploration_initial_eps,
+        exploration_final_eps=config.exploration_final_eps,
+        exploration_timesteps=config.exploration_timesteps,
+        masked=config.masked,
+        masked_exploration=config.masked_exploration,
+        demo_fraction=config.demo_fraction,
+        margin=config.margin,
+        margin_weight=config.margin_weight,
+        augment=augmentations(config, probe or make_env(config)),
+        policy_kwargs=dict(maps=maps, widths=tuple(config.widths)),
+        tensorboard_log=tensorboard_log,
+        seed=seed,
+        device=device,
+    )
+
+
+def demo_policy(config: TrainConfig, env: gym.Env) -> Any:
+    """The demonstration policy of ``config`` acting on ``env``'s layout (None if it has none)."""
+    if config.demo_policy is None:
+        return None
+    if config.demo_policy not in DEMO_POLICIES:
+        raise ValueError(f"unknown demo_policy {config.demo_policy!r}; known: {sorted(DEMO_POLICIES)}")
+    return DEMO_POLICIES[config.demo_policy](env)
+
+
+def make_curriculum(config: TrainConfig, seed: int = 0, verbose: int = 1) -> Any:
+    """The curriculum callback of ``config``, with its own greedy-check env (scene stream ``seed + 10**6``)."""
+    from sb3_pixeldqn import CurriculumCallback
+
+    return CurriculumCallback(
+        start_value=config.start_objects, max_value=config.max_objects, min_stage_timesteps=config.min_stage_timesteps,
+        gate=config.gate, eval_env=make_env(config), eval_every=config.eval_every,
+        eval_episodes=config.eval_episodes, eval_seed=seed + 10**6, eval_max_actions=config.eval_max_actions,
+        verbose=verbose,
+    )

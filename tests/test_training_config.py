@@ -1,0 +1,94 @@
+"""shelf_env.training: presets, the model they build, demonstrations on the real env, masks in evaluation."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from sb3_pixeldqn import PixelDoubleDQN
+from shelf_env import evaluation as ev
+from shelf_env.heuristics import DistanceHeuristic
+from shelf_env.symmetry import MirrorWidth, PermuteClasses
+from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_env, make_model
+
+
+def test_paper_preset_keeps_the_papers_values():
+    paper = PRESETS["paper"]
+    assert (paper.learning_rate, paper.tau, paper.target_update_interval, paper.gamma, paper.batch_size) == (
+        1e-4, 1e-3, 1, 0.9, 32)
+    assert not paper.masked and not paper.masked_exploration and paper.demo_policy is None and paper.augment == ()
+    assert (paper.pixel_size, paper.gate, paper.relabel, paper.exploration_initial_eps) == (
+        0.005, "training", "all", 0.8)
+
+
+def test_recipe_model_has_every_lever_and_config_round_trips():
+    config = PRESETS["recipe"].replace(buffer_size=100, widths=(4, 8, 8))
+    env = make_env(config)
+    model = make_model(config, env)
+    assert model.masked and model._uses_masks() and model.target_update_interval == 100 and model.tau == 1.0
+    assert [type(t) for t in model.augment] == [MirrorWidth, PermuteClasses]
+    assert model.replay_buffer.relabel == "changed" and model.replay_buffer.noop == "penalty"
+    assert model.observation_space.shape == (4, 40, 60)
+    assert TrainConfig.from_dict(config.to_dict()) == config
+    with pytest.raises(ValueError, match="unknown TrainConfig fields \\['lr'\\]"):
+        config.replace(lr=1)
+    with pytest.raises(ValueError, match="unknown augmentations \\['rotate'\\]"):
+        make_model(config.replace(augment=("rotate",)), env)
+    env.close()
+
+
+def test_heuristic_demonstrations_fill_the_kept_store_and_a_wrong_layout_is_refused():
+    config = PRESETS["recipe"].replace(buffer_size=50, widths=(4, 8, 8), start_objects=1)
+    env = make_env(config)
+    model = make_model(config, env)
+    stats = model.collect_demonstrations(demo_policy(config, env), 4)
+    assert stats["steps"] == 4 and stats["successes"] >= 1
+    demos = model.replay_buffer.demonstrations
+    assert demos.n_stored >= 4
+    masks = np.unpackbits(demos.next_masks[:4], axis=1, count=int(env.action_space.n)).astype(bool)
+    assert masks.any(axis=1).all() and not masks.all(axis=1).any()  # real masks, final ones from info
+    pick_only = gym.make("ShelfSort-v0", primitives=("pick",), pixel_size=0.01)
+    with pytest.raises(ValueError, match="acts in Discrete\\(2400\\) but the model's action layout is Discrete"):
+        model.collect_demonstrations(DistanceHeuristic(pick_only), 2)
+    pick_only.close()
+    env.close()
+
+
+def test_episode_end_carries_the_final_mask(env):
+    env.reset(seed=3, options={"num_objects": 1})
+    policy = DistanceHeuristic(env)
+    obs = env._obs
+    for _ in range(40):
+        mask_before = env.action_masks()
+        action, _ = policy.predict(obs)
+        obs, _, terminated, truncated, info = env.step(int(action))
+        if terminated or truncated:
+            assert np.array_equal(info["action_mask"], env.action_masks())
+            break
+        assert "action_mask" not in info and mask_before.dtype == bool
+    else:
+        pytest.fail("the episode did not end")
+
+
+def test_evaluation_gives_masks_to_masked_policies_only(tmp_path):
+    config = PRESETS["recipe"].replace(buffer_size=20, widths=(4, 8, 8))
+    env = make_env(config)
+    model = make_model(config, env)
+    assert ev.takes_action_masks(model) and not ev.takes_action_masks(DistanceHeuristic(env))
+    model.save(tmp_path / "m.zip")
+    assert ev.checkpoint_pixel_size(tmp_path / "m.zip") == pytest.approx(0.01)
+    records = ev.evaluate_cell(str(tmp_path / "m.zip"), 1, ev.HELDOUT_SEED, 1, "train")
+    assert records[0].actions >= 1 and records[0].noops <= records[0].actions
+    seen = []
+    original = PixelDoubleDQN.predict
+
+    def spy(self, obs, *a, action_masks=None, **kw):
+        seen.append(action_masks)
+        return original(self, obs, *a, action_masks=action_masks, **kw)
+
+    PixelDoubleDQN.predict = spy
+    try:
+        ev.run_episode(env, PixelDoubleDQN.load(tmp_path / "m.zip", env=env), ev.scene_seed(1, 1, 0), max_actions=3)
+    finally:
+        PixelDoubleDQN.predict = original
+    assert seen and all(m is not None and m.dtype == bool and m.any() for m in seen)
+    env.close()
