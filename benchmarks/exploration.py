@@ -4,7 +4,7 @@
 
 Part 1 (ShelfSort-v0, P+S): from fresh scenes, take ``--actions`` purely exploratory actions per
 N, either uniform over all 3 x 80 x 120 actions or drawn as PixelDoubleDQN draws them with
-``exploration_mask="exploration_mask"`` (a map uniformly, then a pixel the env marks useful). An
+the env's ``action_masks()`` (a map uniformly, then a pixel the env marks useful). An
 action is *effective* if some object moved more than 5 mm. Prints the effective fraction per mode
 and the ratio masked / uniform, measured in this run.
 
@@ -42,7 +42,7 @@ def effective_fraction(n: int, mode: str, actions: int, seed: int) -> float:
         if mode == "uniform":
             action = int(rng.integers(env.action_space.n))
         else:
-            action = draw_masked_action(env.exploration_mask(), len(env.map_names), rng)
+            action = draw_masked_action(env.action_masks(), len(env.map_names), rng)
         _, _, terminated, truncated, _ = env.step(action)
         taken += 1
         after = env.world.positions()[:, :3]
@@ -58,7 +58,7 @@ def effective_fraction(n: int, mode: str, actions: int, seed: int) -> float:
 def learned_hit_rate(mask: bool, steps: int) -> float:
     model = PixelDoubleDQN("FCNPolicy", FindTheSquareEnv(), policy_kwargs=dict(maps=[("pick", 0)]), seed=0,
                            learning_rate=1e-3, learning_starts=50, exploration_timesteps=steps // 2,
-                           buffer_size=2000, exploration_mask="exploration_mask" if mask else None)
+                           buffer_size=2000, masked=False, masked_exploration=mask)
     model.learn(steps)
     env, hits = FindTheSquareEnv(), 0
     for s in range(50):

@@ -1,6 +1,10 @@
 """Train PixelDoubleDQN on ShelfSort-v0 with the curriculum, on a wall-clock budget, resumably.
 
-    python examples/train.py --out runs/curriculum --hours 2
+    python examples/train.py --out runs/curriculum --hours 2 [--preset recipe|paper|issue3] [--set KEY=VALUE ...]
+
+The configuration is a `shelf_env.training.TrainConfig` preset with overrides; it is stored in
+``progress.json`` and a resumed run keeps it. With demonstrations, they are collected first (their
+wall time counts in the budget) and kept in the replay buffer.
 
 Everything lives in ``--out``: ``model.zip`` and ``replay.pkl`` (checkpoint, written atomically
 every ``--checkpoint-minutes``), ``progress.json`` (wall time and steps used so far, curriculum
@@ -17,38 +21,76 @@ import csv
 import json
 import pathlib
 import time
+from typing import Any
 
-import gymnasium as gym
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
-from sb3_pixeldqn import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, CurriculumCallback, PixelDoubleDQN
+from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env.evaluation import write_json_atomic
+from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_curriculum, make_env, make_model
 
 EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
+
+
+def parse_set(text: str) -> tuple[str, Any]:
+    """"key=value" with value parsed as JSON when it can be (numbers, true/false, null, lists)."""
+    if "=" not in text:
+        raise argparse.ArgumentTypeError(f"--set needs key=value, got {text!r}")
+    key, value = text.split("=", 1)
+    try:
+        return key, json.loads(value)
+    except json.JSONDecodeError:
+        return key, value
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/curriculum"))
+    p.add_argument("--preset", choices=sorted(PRESETS), default="recipe",
+                   help="starting configuration (shelf_env/training.py); flags below override it")
+    p.add_argument("--set", dest="overrides", type=parse_set, action="append", default=[], metavar="KEY=VALUE",
+                   help="override any TrainConfig field, e.g. --set masked=false --set augment=[]")
     p.add_argument("--hours", type=float, default=2.0, help="total wall-clock budget over all resumes")
     p.add_argument("--max-steps", type=int, default=10**7, help="total env-step budget over all resumes")
     p.add_argument("--checkpoint-minutes", type=float, default=10.0)
-    p.add_argument("--primitives", choices=["pick-push", "pick"], default="pick-push", help="P+S or the S baseline")
-    p.add_argument("--start-objects", type=int, default=1)
-    p.add_argument("--max-objects", type=int, default=8)
-    p.add_argument("--widths", type=int, nargs=3, default=[16, 32, 64])
-    p.add_argument("--buffer-size", type=int, default=50_000)
-    p.add_argument("--learning-starts", type=int, default=100)
-    p.add_argument("--learning-rate", type=float, default=1e-4)
-    p.add_argument("--exploration-timesteps", type=int, default=2_000)
-    p.add_argument("--min-stage-timesteps", type=int, default=0,
-                   help="curriculum stages last at least this many steps (0: the paper's rule)")
+    p.add_argument("--primitives", choices=["pick-push", "pick"], default=None, help="P+S or the S baseline")
+    p.add_argument("--start-objects", type=int, default=None)
+    p.add_argument("--max-objects", type=int, default=None)
+    p.add_argument("--widths", type=int, nargs=3, default=None)
+    p.add_argument("--buffer-size", type=int, default=None)
+    p.add_argument("--learning-starts", type=int, default=None)
+    p.add_argument("--learning-rate", type=float, default=None)
+    p.add_argument("--exploration-timesteps", type=int, default=None)
+    p.add_argument("--min-stage-timesteps", type=int, default=None,
+                   help="curriculum stages last at least this many steps (0: no minimum)")
     p.add_argument("--uniform-exploration", action="store_true", help="draw exploratory actions uniformly")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     return p.parse_args(argv)
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    """The preset with the flags' and ``--set``'s overrides applied."""
+    changes: dict[str, Any] = {}
+    if args.primitives is not None:
+        changes["primitives"] = ("pick", "push") if args.primitives == "pick-push" else ("pick",)
+    for flag, key in (("start_objects", "start_objects"), ("max_objects", "max_objects"),
+                      ("buffer_size", "buffer_size"), ("learning_starts", "learning_starts"),
+                      ("learning_rate", "learning_rate"), ("exploration_timesteps", "exploration_timesteps"),
+                      ("min_stage_timesteps", "min_stage_timesteps")):
+        if getattr(args, flag) is not None:
+            changes[key] = getattr(args, flag)
+    if args.widths is not None:
+        changes["widths"] = tuple(args.widths)
+    if args.uniform_exploration:
+        changes["masked_exploration"] = False
+    changes.update(dict(args.overrides))
+    for key in ("primitives", "augment", "widths"):
+        if key in changes:
+            changes[key] = tuple(changes[key])
+    return PRESETS[args.preset].replace(**changes)
 
 
 class BudgetAndCheckpoint(BaseCallback):
@@ -128,38 +170,46 @@ def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     th.set_num_threads(args.threads)
     args.out.mkdir(parents=True, exist_ok=True)
-    primitives = ("pick", "push") if args.primitives == "pick-push" else ("pick",)
-    env = gym.make("ShelfSort-v0", num_objects=args.start_objects, primitives=primitives)
     progress_path = args.out / "progress.json"
     resume = (args.out / "model.zip").exists() and progress_path.exists()
-    if resume:
+    if resume:  # the run's own configuration wins over the flags
         progress = json.loads(progress_path.read_text())
-        model = PixelDoubleDQN.load(args.out / "model.zip", env=env, tensorboard_log=str(args.out / "tb"))
-        model.load_replay_buffer(args.out / "replay.pkl")
-        print(f"resuming at step {model.num_timesteps}, {progress['wall_seconds'] / 60:.1f} min used", flush=True)
+        config = TrainConfig.from_dict(progress["config"])
     else:
-        progress = {"wall_seconds": 0.0, "timesteps": 0, "episodes": 0,
-                    "args": {k: str(v) for k, v in vars(args).items()}}
-        model = PixelDoubleDQN(
-            "FCNPolicy",
-            env,
-            learning_rate=args.learning_rate,
-            buffer_size=args.buffer_size,
-            learning_starts=args.learning_starts,
-            exploration_timesteps=args.exploration_timesteps,
-            exploration_mask=None if args.uniform_exploration else "exploration_mask",
-            policy_kwargs=dict(maps=PICK_AND_PUSH_MAPS if len(primitives) == 2 else PICK_ONLY_MAPS,
-                               widths=tuple(args.widths)),
-            tensorboard_log=str(args.out / "tb"),
-            seed=args.seed,
-        )
+        config = config_from_args(args)
+        progress = {"wall_seconds": 0.0, "timesteps": 0, "episodes": 0, "demo_seconds": 0.0,
+                    "args": {k: str(v) for k, v in vars(args).items()}, "config": config.to_dict()}
+    env = make_env(config)
+    if resume:
+        model = PixelDoubleDQN.load(args.out / "model.zip", env=env, tensorboard_log=str(args.out / "tb"))
+        print(f"resuming at step {model.num_timesteps}, {progress['wall_seconds'] / 60:.1f} min used", flush=True)
+        if (args.out / "replay.pkl").exists():
+            model.load_replay_buffer(args.out / "replay.pkl")
+        else:
+            print("no replay.pkl: resuming from the weights, the curriculum stage and epsilon with an empty "
+                  "buffer (demonstrations are collected again)", flush=True)
+    else:
+        model = make_model(config, env, seed=args.seed, tensorboard_log=str(args.out / "tb"))
+    demos = demo_policy(config, env)
+    if demos is not None and model.replay_buffer.demonstrations is None:
+        start = time.monotonic()
+        per_n = max(1, config.demo_steps // len(config.demo_objects))
+        capacity = 2 * per_n * len(config.demo_objects)
+        for n in config.demo_objects:
+            env.unwrapped.set_num_objects(n)
+            stats = model.collect_demonstrations(demos, per_n, capacity=capacity)
+            print(f"demonstrations: {config.demo_policy} at N = {n}, {stats['steps']} steps, {stats['episodes']} "
+                  f"episodes, {stats['successes']} sorted", flush=True)
+        seconds = time.monotonic() - start
+        progress["wall_seconds"] += seconds
+        progress["demo_seconds"] = progress.get("demo_seconds", 0.0) + seconds
+        print(f"demonstrations took {seconds:.0f} s", flush=True)
     truncate_csv(args.out / "episodes.csv", progress["episodes"])
     budget = BudgetAndCheckpoint(args.out, progress, args.hours, args.max_steps, args.checkpoint_minutes)
     if budget.wall_seconds() >= budget.budget_seconds or model.num_timesteps >= args.max_steps:
         print("budget already spent; nothing to do")
         return
-    curriculum = CurriculumCallback(start_value=args.start_objects, max_value=args.max_objects,
-                                    min_stage_timesteps=args.min_stage_timesteps, verbose=1)
+    curriculum = make_curriculum(config, seed=args.seed)
     model.learn(10**9, callback=CallbackList([curriculum, budget]), log_interval=5, reset_num_timesteps=not resume)
     print(f"done: {model.num_timesteps} steps, {progress['wall_seconds'] / 60:.1f} min, "
           f"curriculum {model.curriculum_state['history']}", flush=True)

@@ -12,7 +12,7 @@ import train  # noqa: E402
 
 def test_checkpoints_count_wall_time_once_and_resume(tmp_path):
     common = ["--out", str(tmp_path), "--learning-starts", "2", "--buffer-size", "200", "--widths", "4", "8", "8",
-              "--checkpoint-minutes", "0", "--threads", "1"]
+              "--checkpoint-minutes", "0", "--threads", "1", "--set", "demo_steps=3"]
     t0 = time.monotonic()
     train.main([*common, "--max-steps", "4"])
     elapsed = time.monotonic() - t0
@@ -21,6 +21,7 @@ def test_checkpoints_count_wall_time_once_and_resume(tmp_path):
     # checkpoints after every step: the recorded total must still be the real time, not a sum of totals
     assert 0 < progress["wall_seconds"] <= elapsed + 1.0
     assert (tmp_path / "model.zip").exists() and (tmp_path / "replay.pkl").exists()
+    assert progress["config"]["demo_steps"] == 3 and progress["config"]["pixel_size"] == 0.01
 
     train.main([*common, "--max-steps", "7"])
     progress2 = json.loads((tmp_path / "progress.json").read_text())
@@ -30,3 +31,9 @@ def test_checkpoints_count_wall_time_once_and_resume(tmp_path):
         rows = list(csv.DictReader(f))
     assert len(rows) == progress2["episodes"]
     assert all(int(a["timestep"]) < int(b["timestep"]) for a, b in zip(rows, rows[1:]))
+    # the demonstrations were collected once and survive the resume through replay.pkl
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    model = PixelDoubleDQN.load(tmp_path / "model.zip")
+    model.load_replay_buffer(tmp_path / "replay.pkl")
+    assert model.replay_buffer.demonstrations.n_stored >= 3 and model.demo_timesteps == 3
