@@ -87,6 +87,7 @@ def run_row(row: str, seed: int, minutes: float, start_objects: int, scenes: int
         metrics[object_set] = ev.episode_summary(records)
         metrics[object_set]["eval_seconds"] = round(time.monotonic() - t0, 1)
     result = {
+        "buffer": buffer_stats(run),
         "row": row, "seed": seed, "description": description, "overrides": {k: v for k, v in overrides.items()},
         "config": progress["config"], "minutes": minutes, "wall_seconds": progress["wall_seconds"],
         "env_steps": int(model.num_timesteps), "demo_steps": int(getattr(model, "demo_timesteps", 0)),
@@ -95,6 +96,18 @@ def run_row(row: str, seed: int, minutes: float, start_objects: int, scenes: int
     model_copy.unlink()  # the row's checkpoint stays in runs/; only its numbers are committed
     ev.write_json_atomic(out / "rows" / f"{row_key(row, seed)}.json", result)
     return result
+
+
+def buffer_stats(run: pathlib.Path) -> dict[str, int]:
+    """What the run's replay buffer holds: transitions, relabelled twins, no-op steps, demonstrations."""
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    model = PixelDoubleDQN.load(run / "model.zip", device="cpu")
+    model.load_replay_buffer(run / "replay.pkl")
+    buf = model.replay_buffer
+    demos = buf.demonstrations
+    return {"stored": int(buf.n_stored), "relabelled": int(buf.n_relabelled), "noop": int(buf.n_noop),
+            "demonstrations": int(demos.n_stored) if demos is not None else 0}
 
 
 def heuristic_metrics(out: pathlib.Path, scenes: int) -> dict[str, dict[str, float]]:

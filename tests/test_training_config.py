@@ -92,3 +92,14 @@ def test_evaluation_gives_masks_to_masked_policies_only(tmp_path):
         PixelDoubleDQN.predict = original
     assert seen and all(m is not None and m.dtype == bool and m.any() for m in seen)
     env.close()
+
+
+def test_committed_recipe_checkpoint_sorts_held_out_scenes():
+    """results/learning/recipe_n3.zip (docs/learning.md) loads on a fresh env at its cell size and,
+    greedy with the env's masks, sorts the first held-out scenes at N = 3 within 2 N actions."""
+    path = "results/learning/recipe_n3.zip"
+    env = gym.make("ShelfSort-v0", num_objects=3, pixel_size=ev.checkpoint_pixel_size(path))
+    model = PixelDoubleDQN.load(path, env=env, device="cpu")
+    results = [ev.run_episode(env, model, ev.scene_seed(ev.HELDOUT_SEED, 3, run)) for run in range(3)]
+    assert all(r["success"] and r["actions"] <= 6 and r["noops"] == 0 for r in results), results
+    env.close()
