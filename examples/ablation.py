@@ -144,7 +144,23 @@ def report(out: pathlib.Path, scenes: int) -> str:
         plot_curves(rows, out / "learning_curves.png")
     table = "\n".join(lines)
     (out / "ablation.md").write_text(table + "\n")
+    update_doc(DOC, table)
     return table
+
+
+DOC = pathlib.Path(__file__).resolve().parents[1] / "docs" / "learning.md"
+BEGIN, END = "<!-- ablation table: python examples/ablation.py --report -->", "<!-- end ablation table -->"
+
+
+def update_doc(doc: pathlib.Path, table: str) -> None:
+    """Replace the table between the markers of ``doc`` (docs/learning.md), if it has them."""
+    if not doc.exists():
+        return
+    text = doc.read_text()
+    if BEGIN not in text or END not in text:
+        return
+    head, rest = text.split(BEGIN, 1)
+    doc.write_text(head + BEGIN + "\n" + table + "\n" + END + rest.split(END, 1)[1])
 
 
 def plot_curves(rows: list[dict[str, Any]], png: pathlib.Path) -> None:

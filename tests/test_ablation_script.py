@@ -26,6 +26,9 @@ def test_rows_on_disk_are_skipped_and_reported(tmp_path, monkeypatch, capsys):
           "ycb": {"sr": 90.0, "actions_per_success": 2.4, "noop_share": 0.0}}
     (rows / "h-d_10.json").write_text(json.dumps(hd))
     monkeypatch.setattr(ablation, "run_row", lambda *a, **k: (_ for _ in ()).throw(AssertionError("trained")))
+    doc = tmp_path / "learning.md"
+    doc.write_text(f"intro\n{ablation.BEGIN}\nold table\n{ablation.END}\noutro\n")
+    monkeypatch.setattr(ablation, "DOC", doc)
     ablation.main(["--rows", "recipe", "no-demos", "--out", str(tmp_path), "--scenes", "10"])
     out = capsys.readouterr().out
     assert "recipe_s0: on disk, skipped" in out and "no-demos_s0: on disk, skipped" in out
@@ -34,3 +37,5 @@ def test_rows_on_disk_are_skipped_and_reported(tmp_path, monkeypatch, capsys):
     assert table[3].startswith("| no-demos | 0 |")
     assert table[-1].startswith("| H-d | - | heuristic | 100 | 90 |")
     assert (tmp_path / "learning_curves.png").stat().st_size > 1000
+    text = doc.read_text()
+    assert "old table" not in text and "| recipe | 0 |" in text and text.endswith("outro\n")
