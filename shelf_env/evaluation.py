@@ -125,7 +125,11 @@ def make_policy(policy: str, env: gym.Env, seed: int = 0) -> Any:
 
 
 def takes_action_masks(policy: Any) -> bool:
-    """Whether ``policy.predict`` accepts sb3-contrib's ``action_masks=`` (a PixelDoubleDQN does)."""
+    """Whether ``policy`` acts with sb3-contrib's ``action_masks=``: its ``predict`` accepts them (a
+    PixelDoubleDQN does) and it was not trained with ``masked=False`` (the paper's all-pixel argmax,
+    which it keeps at evaluation)."""
+    if getattr(policy, "masked", None) is False:
+        return False
     try:
         return "action_masks" in inspect.signature(policy.predict).parameters
     except (TypeError, ValueError):
@@ -136,7 +140,8 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
     """Roll out ``policy`` greedily from the scene of ``reset_seed``; success needs < ``max_actions`` actions.
 
     A policy whose ``predict`` takes ``action_masks`` gets the env's masks at every step, as a
-    MaskablePPO evaluation does; the heuristics choose among object cells by construction.
+    MaskablePPO evaluation does, unless it was trained with ``masked=False``; the heuristics choose
+    among object cells by construction.
     """
     obs, info = env.reset(seed=reset_seed)
     unsorted = info["num_unsorted_initial"]

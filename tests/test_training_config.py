@@ -74,6 +74,8 @@ def test_evaluation_gives_masks_to_masked_policies_only(tmp_path):
     env = make_env(config)
     model = make_model(config, env)
     assert ev.takes_action_masks(model) and not ev.takes_action_masks(DistanceHeuristic(env))
+    # a model trained without masks is evaluated as it was trained: the paper's all-pixel argmax
+    assert not ev.takes_action_masks(make_model(config.replace(masked=False), env))
     model.save(tmp_path / "m.zip")
     assert ev.checkpoint_pixel_size(tmp_path / "m.zip") == pytest.approx(0.01)
     records = ev.evaluate_cell(str(tmp_path / "m.zip"), 1, ev.HELDOUT_SEED, 1, "train")
