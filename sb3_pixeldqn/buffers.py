@@ -125,18 +125,21 @@ class HindsightRelabelReplayBuffer(ReplayBuffer):
         done: np.ndarray,
         infos: list[dict[str, Any]],
         next_action_masks: np.ndarray | None = None,
-    ) -> None:
+    ) -> list[bool]:
         """Store each env's transition, then its relabelled twin if the env reported one.
 
         ``next_action_masks``: ``(n_envs, n_actions)`` bool, the actions allowed in each next state
-        (None: all of them).
+        (None: all of them). Returns, per env, whether its step was a no-op (observation unchanged),
+        so that callers can log what the buffer detected without comparing the observations again.
         """
+        noops = []
         obs, next_obs = np.asarray(obs), np.asarray(next_obs)
         action, reward, done = np.asarray(action), np.asarray(reward, dtype=np.float32), np.asarray(done)
         for i, info in enumerate(infos):
             mask = None if next_action_masks is None else self._packed(next_action_masks[i])
             r, d = float(reward[i]), float(done[i])
             changed = not unchanged(obs[i], next_obs[i])
+            noops.append(not changed)
             if not changed:
                 self.n_noop += 1
                 if self.noop != "keep":
@@ -148,6 +151,7 @@ class HindsightRelabelReplayBuffer(ReplayBuffer):
             relabelled = info.get(RELABEL_KEY)
             if relabelled is not None and (self.relabel == "all" or (self.relabel == "changed" and changed)):
                 self._add_relabelled(relabelled, action[i], mask)
+        return noops
 
     def _add_one(self, obs: np.ndarray, next_obs: np.ndarray, action: Any, reward: float, done: float,
                  info: dict[str, Any], packed_mask: np.ndarray | None) -> None:

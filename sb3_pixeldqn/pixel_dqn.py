@@ -58,7 +58,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from stable_baselines3.common.utils import polyak_update
 from stable_baselines3.common.vec_env import VecEnv
 
-from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer, TransitionBatch, unchanged
+from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer, TransitionBatch
 from sb3_pixeldqn.policies import FCNPolicy, PixelQNetwork, check_action_masks, describe_layout, masked_argmax
 
 SelfPixelDoubleDQN = TypeVar("SelfPixelDoubleDQN", bound="PixelDoubleDQN")
@@ -241,10 +241,16 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         self.q_net = self.policy.q_net
         self.q_net_target = self.policy.q_net_target
         self.exploration_rate = self._epsilon(self.stage_timesteps)
+        if not issubclass(self.replay_buffer_class, HindsightRelabelReplayBuffer):
+            raise ValueError(
+                f"PixelDoubleDQN needs a HindsightRelabelReplayBuffer (or a subclass), got {self.replay_buffer_class}"
+            )
         self._sample_rng = np.random.default_rng(self.seed)
-        if self.env is not None:
-            self._uses_masks()  # a clear error now if masked=True and the env has none
+        self._resolve_masks()
 
+    def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        super().set_env(env, force_reset)
+        self._resolve_masks()
     def _epsilon(self, stage_timesteps: int) -> float:
         progress = min(1.0, stage_timesteps / self.exploration_timesteps)
         return self.exploration_initial_eps + progress * (self.exploration_final_eps - self.exploration_initial_eps)
@@ -262,29 +268,36 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             self.logger.record("rollout/noop_rate", float(np.mean(self._noop_history)))
 
     # ------------------------------------------------------------------ masks
-    def _env_has_masks(self) -> bool:
-        return self.env is not None and bool(self.env.has_attr("action_masks"))
+    @property
+    def acts_masked(self) -> bool:
+        """Whether this model acts within ``action_masks`` when they are available: False only for a
+        model trained with ``masked=False`` (the paper's all-pixel argmax, kept at evaluation too)."""
+        return self.masked is not False
+
+    def _resolve_masks(self) -> None:
+        """Decide once per env whether greedy collection / the target (``_use_masks``) and exploration
+        (``_explore_masked``) use the env's masks; a clear error if they are required and missing."""
+        has_masks = self.env is not None and bool(self.env.has_attr("action_masks"))
+        if self.env is not None and not has_masks:
+            if self.masked:
+                raise ValueError("masked=True but the env has no action_masks() method; pass masked=False")
+            if self.masked_exploration:
+                raise ValueError("masked_exploration=True but the env has no action_masks() method")
+        self._use_masks = has_masks if self.masked is None else bool(self.masked)
+        explore = self.masked_exploration
+        self._explore_masked = self._use_masks if explore is None else bool(explore)
+        #: Masks of the training envs after the last step, valid while ``_last_obs`` is that step's
+        #: observation (anything that resets the envs replaces ``_last_obs``).
+        self._step_masks: tuple[Any, np.ndarray] | None = None
 
     def _uses_masks(self) -> bool:
-        """Whether greedy collection and the target argmax use the env's masks."""
-        if self.masked is None:
-            return self._env_has_masks()
-        if self.masked and self.env is not None and not self._env_has_masks():
-            raise ValueError("masked=True but the env has no action_masks() method; pass masked=False")
-        return bool(self.masked)
+        """Whether greedy collection and the target argmax use the env's masks (decided per env)."""
+        return self._use_masks
 
-    def _explores_masked(self) -> bool:
-        if self.masked_exploration is None:
-            return self._uses_masks()
-        if self.masked_exploration and not self._env_has_masks():
-            raise ValueError("masked_exploration=True but the env has no action_masks() method")
-        return bool(self.masked_exploration)
-
-    def _current_masks(self, indices: Sequence[int] | None = None) -> np.ndarray:
-        """``(k, n_actions)`` bool masks of the training envs (all, or ``indices``), checked."""
+    def _current_masks(self) -> np.ndarray:
+        """``(n_envs, n_actions)`` bool masks of the training envs now, checked."""
         assert self.env is not None
-        masks = self.env.env_method("action_masks", indices=None if indices is None else [int(i) for i in indices])
-        return check_action_masks(np.stack([np.asarray(m) for m in masks]), int(self.action_space.n), len(masks))
+        return check_action_masks(get_action_masks(self.env), int(self.action_space.n), self.env.num_envs)
 
     # ------------------------------------------------------------------ maths
     def double_dqn_target(self, next_obs: th.Tensor, rewards: th.Tensor, dones: th.Tensor,
@@ -353,7 +366,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         losses, margin_losses = [], []
         use_masks = self.masked is not False
         buffer = self.replay_buffer
-        assert isinstance(buffer, HindsightRelabelReplayBuffer), "PixelDoubleDQN needs a HindsightRelabelReplayBuffer"
+        assert isinstance(buffer, HindsightRelabelReplayBuffer)  # _setup_model checks the class
         for _ in range(gradient_steps):
             batch = self.augmented(buffer.sample_arrays(batch_size, self.demo_fraction, self._sample_rng))
             obs = th.as_tensor(batch.observations, device=self.device)
@@ -393,14 +406,17 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             explore = np.ones(n_envs, dtype=bool)
         else:
             explore = np.random.rand(n_envs) < self.exploration_rate
-        masks = self._current_masks() if (self._uses_masks() or self._explores_masked()) else None
+        masks = None
+        if self._use_masks or self._explore_masked:
+            cached = self._step_masks
+            masks = cached[1] if cached is not None and cached[0] is self._last_obs else self._current_masks()
         actions = np.zeros(n_envs, dtype=np.int64)
         if not explore.all():
             greedy, _ = self.policy.predict(self._last_obs, deterministic=True,  # type: ignore[arg-type]
-                                            action_masks=masks if self._uses_masks() else None)
+                                            action_masks=masks if self._use_masks else None)
             actions[~explore] = np.asarray(greedy).reshape(-1)[~explore]
         if explore.any():
-            actions[explore] = self._exploratory_actions(explore, masks if self._explores_masked() else None)
+            actions[explore] = self._exploratory_actions(explore, masks if self._explore_masked else None)
         return actions, actions
 
     def _exploratory_actions(self, explore: np.ndarray, masks: np.ndarray | None) -> np.ndarray:
@@ -410,21 +426,37 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         return np.array([draw_masked_action(masks[i], self.policy.n_maps, np.random) for i in np.flatnonzero(explore)],
                         dtype=np.int64)
 
-    def _next_masks(self, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray | None:
+    def _next_masks(self, new_obs: Any, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray | None:
         """Masks of the states each env's step reached (for the buffer), or None when unused.
 
-        For an env whose episode ended, the VecEnv has already reset; its final mask is read from
-        ``info["action_mask"]`` when the env provides it, else every action counts as allowed
-        (that matters only for time-limit truncations: terminal transitions bootstrap nothing).
+        One query of the envs serves twice: the masks of ``new_obs`` are also those of the next
+        action (cached in ``_step_masks``). For an env whose episode ended, the VecEnv has already
+        reset, so its final mask is read from ``info["action_mask"]`` when the env provides it, else
+        every action counts as allowed (that matters only for time-limit truncations: terminal
+        transitions bootstrap nothing).
         """
-        if not self._uses_masks():
+        if not (self._use_masks or self._explore_masked):
             return None
-        masks = self._current_masks()
+        current = self._current_masks()
+        self._step_masks = (new_obs, current)
+        if not self._use_masks:
+            return None
+        masks = current.copy()
         for i, done in enumerate(dones):
             if done:
                 final = infos[i].get(FINAL_MASK_KEY)
                 masks[i] = True if final is None else check_action_masks(final, masks.shape[1], 1)[0]
         return masks
+
+    @staticmethod
+    def _final_observations(new_obs: Any, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray:
+        """The observations each env's step reached: ``new_obs`` with the final observation of
+        auto-reset envs put back (a VecEnv returns the next episode's first one)."""
+        next_obs = np.array(new_obs, copy=True)
+        for i, done in enumerate(dones):
+            if done and infos[i].get("terminal_observation") is not None:
+                next_obs[i] = infos[i]["terminal_observation"]
+        return next_obs
 
     def _store_transition(
         self,
@@ -436,17 +468,11 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         infos: list[dict[str, Any]],
     ) -> None:
         """SB3's store (terminal observations of auto-reset envs put back), plus the next-state masks."""
-        next_obs = np.array(new_obs, copy=True)
-        for i, done in enumerate(dones):
-            if done and infos[i].get("terminal_observation") is not None:
-                next_obs[i] = infos[i]["terminal_observation"]
-        last_obs = np.asarray(self._last_obs)
-        self._noop_history.extend(unchanged(last_obs[i], next_obs[i]) for i in range(len(dones)))
-        masks = self._next_masks(dones, infos)
-        if isinstance(replay_buffer, HindsightRelabelReplayBuffer):
-            replay_buffer.add(last_obs, next_obs, buffer_action, reward, dones, infos, next_action_masks=masks)
-        else:
-            replay_buffer.add(last_obs, next_obs, buffer_action, reward, dones, infos)
+        next_obs = self._final_observations(new_obs, dones, infos)
+        masks = self._next_masks(new_obs, dones, infos)
+        noops = replay_buffer.add(np.asarray(self._last_obs), next_obs, buffer_action, reward, dones, infos,  # type: ignore[call-arg]
+                                  next_action_masks=masks)
+        self._noop_history.extend(noops)
         self._last_obs = new_obs  # type: ignore[assignment]
         self._last_original_obs = new_obs  # type: ignore[assignment]
 
@@ -469,7 +495,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
                 f"layout is {self.action_space} ({describe_layout(self.policy.maps)}): build it on the same env layout"
             )
         buffer = self.replay_buffer
-        assert isinstance(buffer, HindsightRelabelReplayBuffer), "demonstrations need a HindsightRelabelReplayBuffer"
+        assert isinstance(buffer, HindsightRelabelReplayBuffer)  # _setup_model checks the class
         env = self.env
         n_actions = int(self.action_space.n)
         obs = env.reset()
@@ -482,13 +508,10 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
                     f"expected {env.num_envs} action(s) in [0, {n_actions})"
                 )
             new_obs, rewards, dones, infos = env.step(actions)
-            next_obs = np.array(new_obs, copy=True)
-            for i, done in enumerate(dones):
-                if done:
-                    next_obs[i] = infos[i]["terminal_observation"]
-                    episodes += 1
-                    successes += bool(infos[i].get("is_success"))
-            buffer.add_demonstration(obs, next_obs, actions, rewards, dones, infos, self._next_masks(dones, infos),
+            episodes += int(dones.sum())
+            successes += sum(bool(info.get("is_success")) for done, info in zip(dones, infos) if done)
+            buffer.add_demonstration(obs, self._final_observations(new_obs, dones, infos), actions, rewards, dones,
+                                     infos, self._next_masks(new_obs, dones, infos),
                                      capacity=capacity or 2 * n_steps * env.num_envs)
             obs = new_obs
             if progress is not None:
@@ -523,9 +546,8 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             explore = np.random.rand(flat.size) < self.exploration_rate
             if action_masks is None:
                 flat[explore] = np.random.randint(int(self.action_space.n), size=int(explore.sum()))  # type: ignore[attr-defined]
-            else:
-                masks = check_action_masks(action_masks, int(self.action_space.n), flat.size)
-                flat[explore] = self._exploratory_actions(explore, masks)
+            else:  # the policy's predict has validated them
+                flat[explore] = self._exploratory_actions(explore, np.asarray(action_masks).reshape(flat.size, -1))
         return action, state
 
     # ------------------------------------------------------------- save / load
@@ -548,7 +570,8 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         )
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "q_net", "q_net_target", "_sample_rng", "_noop_history"]
+        return [*super()._excluded_save_params(), "q_net", "q_net_target", "_sample_rng", "_noop_history",
+                "_use_masks", "_explore_masked", "_step_masks"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.optimizer"], []
