@@ -13,7 +13,7 @@ Two promotion rules:
   are ε-greedy. With masked exploration those flatter the policy: a random allowed pick is often
   right, so a stage can pass before the greedy policy has learned anything.
 - ``gate="greedy"`` (recommended): every ``eval_every`` steps the deterministic policy — masked
-  with the eval env's ``action_masks()`` when it has them, as `PixelDoubleDQN` acts — plays
+  with the eval env's ``action_masks()`` when it has them and the model ``acts_masked`` — plays
   ``eval_episodes`` fresh scenes of ``eval_env`` at the current N; the stage passes when at least
   ``threshold`` of them succeed. Scenes come from reset seeds drawn from ``eval_seed``'s own
   stream, never from the training env's.
@@ -193,7 +193,8 @@ class CurriculumCallback(BaseCallback):
         env = self.eval_env
         assert env is not None
         env.get_wrapper_attr(self.setter)(self.value)
-        has_masks = env.has_wrapper_attr("action_masks")
+        # as the model acts: with the env's masks unless it was trained without them (acts_masked)
+        has_masks = env.has_wrapper_attr("action_masks") and getattr(self.model, "acts_masked", True)
         successes = 0
         for _ in range(self.eval_episodes):
             obs, info = env.reset(seed=int(self.eval_rng.integers(2**31)))

@@ -126,9 +126,9 @@ def make_policy(policy: str, env: gym.Env, seed: int = 0) -> Any:
 
 def takes_action_masks(policy: Any) -> bool:
     """Whether ``policy`` acts with sb3-contrib's ``action_masks=``: its ``predict`` accepts them (a
-    PixelDoubleDQN does) and it was not trained with ``masked=False`` (the paper's all-pixel argmax,
-    which it keeps at evaluation)."""
-    if getattr(policy, "masked", None) is False:
+    PixelDoubleDQN does) and it ``acts_masked`` (False for a model trained with ``masked=False``,
+    which keeps the paper's all-pixel argmax at evaluation)."""
+    if not getattr(policy, "acts_masked", True):
         return False
     try:
         return "action_masks" in inspect.signature(policy.predict).parameters

@@ -300,3 +300,19 @@ def test_greedy_gate_promotes_on_the_deterministic_policy_only():
         assert model.curriculum_state["greedy_history"] == gate.greedy_history
     with pytest.raises(ValueError, match="needs an eval_env"):
         CurriculumCallback(gate="greedy")
+
+
+def test_greedy_checks_act_as_the_model_was_trained(monkeypatch):
+    # a model trained with masked=False keeps its all-pixel argmax in the curriculum's greedy checks
+    for masked, expect_masks in ((None, True), (False, False)):
+        model = make_model(CoinEnv(p_success=1.0), n_maps=1, learning_starts=10**6, masked=masked)
+        seen: list = []
+
+        def spy(obs, seen=seen, original=model.predict, **kw):
+            seen.append(kw.get("action_masks"))
+            return original(obs, **kw)
+
+        monkeypatch.setattr(model, "predict", spy)
+        gate = CurriculumCallback(gate="greedy", eval_env=CoinEnv(p_success=1.0), eval_every=3, eval_episodes=2)
+        model.learn(4, callback=gate)
+        assert seen and all((m is not None) == expect_masks for m in seen)
