@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import json
 import pathlib
-import shutil
 import sys
 import time
 from typing import Any
@@ -74,16 +73,13 @@ def run_row(row: str, seed: int, minutes: float, start_objects: int, scenes: int
         args += ["--set", f"{key}={json.dumps(list(value) if isinstance(value, tuple) else value)}"]
     train.main(args)
     progress = json.loads((run / "progress.json").read_text())
-    (out / "rows").mkdir(parents=True, exist_ok=True)
-    model_copy = out / "rows" / f"{row_key(row, seed)}.zip"
-    shutil.copyfile(run / "model.zip", model_copy)
     from sb3_pixeldqn import PixelDoubleDQN
 
-    model = PixelDoubleDQN.load(model_copy, device="cpu")
+    model = PixelDoubleDQN.load(run / "model.zip", device="cpu")
     metrics: dict[str, Any] = {}
     for object_set in ("train", "ycb"):
         t0 = time.monotonic()
-        records = ev.evaluate_cell(str(model_copy), 3, HELDOUT_SEED, scenes, object_set)
+        records = ev.evaluate_cell(str(run / "model.zip"), 3, HELDOUT_SEED, scenes, object_set)
         metrics[object_set] = ev.episode_summary(records)
         metrics[object_set]["eval_seconds"] = round(time.monotonic() - t0, 1)
     result = {
@@ -93,31 +89,24 @@ def run_row(row: str, seed: int, minutes: float, start_objects: int, scenes: int
         "env_steps": int(model.num_timesteps), "demo_steps": int(getattr(model, "demo_timesteps", 0)),
         "gradient_steps": int(model._n_updates), "curriculum": progress["curriculum"], "heldout": metrics,
     }
-    model_copy.unlink()  # the row's checkpoint stays in runs/; only its numbers are committed
+    # the row's checkpoint stays in runs/; only its numbers are committed
     ev.write_json_atomic(out / "rows" / f"{row_key(row, seed)}.json", result)
     return result
 
 
 def buffer_stats(run: pathlib.Path) -> dict[str, int]:
     """What the run's replay buffer holds: transitions, relabelled twins, no-op steps, demonstrations."""
-    from sb3_pixeldqn import PixelDoubleDQN
+    from stable_baselines3.common.save_util import load_from_pkl
 
-    model = PixelDoubleDQN.load(run / "model.zip", device="cpu")
-    model.load_replay_buffer(run / "replay.pkl")
-    buf = model.replay_buffer
+    buf = load_from_pkl(run / "replay.pkl")
     demos = buf.demonstrations
     return {"stored": int(buf.n_stored), "relabelled": int(buf.n_relabelled), "noop": int(buf.n_noop),
             "demonstrations": int(demos.n_stored) if demos is not None else 0}
 
 
 def heuristic_metrics(out: pathlib.Path, scenes: int) -> dict[str, dict[str, float]]:
-    """H-d on the held-out scenes (cached in ``rows/h-d.json``)."""
-    path = out / "rows" / f"h-d_{scenes}.json"
-    if path.exists():
-        return json.loads(path.read_text())
-    result = {s: ev.episode_summary(ev.evaluate_cell("h-d", 3, HELDOUT_SEED, scenes, s)) for s in ("train", "ycb")}
-    ev.write_json_atomic(path, result)
-    return result
+    """H-d on the held-out scenes, from the cells ``examples/check_recipe.py`` shares (``<out>/cells/``)."""
+    return {s: ev.episode_summary(ev.cached_cell(out, "h-d", 3, HELDOUT_SEED, scenes, s)) for s in ("train", "ycb")}
 
 
 def report(out: pathlib.Path, scenes: int) -> str:

@@ -22,14 +22,11 @@ from shelf_env import evaluation as ev
 N = 3
 
 
-def _cell(policy: str, object_set: str, scenes: int, path: str) -> list[dict]:
+def _cell(policy: str, object_set: str, scenes: int, out: pathlib.Path) -> list[ev.EpisodeRecord]:
     import torch
 
     torch.set_num_threads(1)
-    cell = pathlib.Path(path)
-    if not cell.exists():
-        ev.save_cell(cell, ev.evaluate_cell(policy, N, ev.HELDOUT_SEED, scenes, object_set))
-    return [r.__dict__ for r in ev.load_cell(cell)]
+    return ev.cached_cell(out, policy, N, ev.HELDOUT_SEED, scenes, object_set)
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -40,12 +37,11 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--workers", type=int, default=2)
     args = p.parse_args(argv)
     ev.check_policy(args.checkpoint)
-    jobs = {(policy, oset): (policy, oset, args.scenes,
-                             str(ev.cell_path(args.out.parent, policy, oset, N, ev.HELDOUT_SEED, args.scenes)))
+    jobs = {(policy, oset): (policy, oset, args.scenes, args.out.parent)
             for policy in (args.checkpoint, "h-d") for oset in ("train", "ycb")}
     with ProcessPoolExecutor(args.workers) as pool:
         futures = {key: pool.submit(_cell, *job) for key, job in jobs.items()}
-        results = {key: ev.episode_summary([ev.EpisodeRecord(**r) for r in f.result()]) for key, f in futures.items()}
+        results = {key: ev.episode_summary(f.result()) for key, f in futures.items()}
     learned = {oset: results[(args.checkpoint, oset)] for oset in ("train", "ycb")}
     hd = {oset: results[("h-d", oset)] for oset in ("train", "ycb")}
     criteria = {

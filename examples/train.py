@@ -87,9 +87,6 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     if args.uniform_exploration:
         changes["masked_exploration"] = False
     changes.update(dict(args.overrides))
-    for key in ("primitives", "augment", "widths"):
-        if key in changes:
-            changes[key] = tuple(changes[key])
     return PRESETS[args.preset].replace(**changes)
 
 

@@ -27,6 +27,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from sb3_pixeldqn.buffers import unchanged
 from shelf_env import params
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
 
@@ -151,7 +152,7 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
         kwargs = {"action_masks": env.unwrapped.action_masks()} if masked else {}
         action, _ = policy.predict(obs, deterministic=True, **kwargs)
         next_obs, _, terminated, truncated, info = env.step(int(np.asarray(action).reshape(-1)[0]))
-        noops += bool(np.array_equal(next_obs, obs))
+        noops += unchanged(obs, next_obs)
         obs = next_obs
         if terminated or truncated:
             break
@@ -215,8 +216,7 @@ def summarize(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
             row[f"{key}_mean"] = float(finite.mean()) if finite.size else math.nan
             row[f"{key}_std"] = float(finite.std()) if finite.size else math.nan
         row["fell_rate"] = float(np.mean([r.fell for rs in by_seed.values() for r in rs]))
-        all_runs = [r for rs in by_seed.values() for r in rs]
-        row["noop_share"] = sum(r.noops for r in all_runs) / max(1, sum(r.actions for r in all_runs))
+        row["noop_share"] = episode_summary([r for rs in by_seed.values() for r in rs])["noop_share"]
         rows.append(row)
     return rows
 
@@ -239,6 +239,17 @@ def save_cell(path: pathlib.Path, records: list[EpisodeRecord]) -> None:
 
 def load_cell(path: pathlib.Path) -> list[EpisodeRecord]:
     return [EpisodeRecord(**r) for r in json.loads(path.read_text())]
+
+
+def cached_cell(out: pathlib.Path, policy: str, num_objects: int, seed: int, runs: int,
+                object_set: str) -> list[EpisodeRecord]:
+    """One cell's records from ``<out>/cells/`` if it is there, else evaluated and written there."""
+    path = cell_path(out, policy, object_set, num_objects, seed, runs)
+    if path.exists():
+        return load_cell(path)
+    records = evaluate_cell(policy, num_objects, seed, runs, object_set)
+    save_cell(path, records)
+    return records
 
 
 def write_results(out: pathlib.Path, records: list[EpisodeRecord], config: dict[str, Any]) -> list[dict[str, Any]]:

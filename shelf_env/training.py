@@ -80,6 +80,11 @@ class TrainConfig:
     relabel: str = "changed"
     extra: dict[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        # sequences given as lists (JSON, --set) are stored as the tuples the fields declare
+        for key in ("primitives", "augment", "widths", "demo_objects"):
+            setattr(self, key, tuple(getattr(self, key)))
+
     def replace(self, **changes: Any) -> TrainConfig:
         unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
         if unknown:
@@ -95,10 +100,6 @@ class TrainConfig:
         unknown = set(data) - known
         if unknown:
             raise ValueError(f"unknown TrainConfig fields {sorted(unknown)}")
-        data = dict(data)
-        for key in ("primitives", "augment", "widths", "demo_objects"):
-            if key in data:
-                data[key] = tuple(data[key])
         return cls(**data)
 
 

@@ -7,6 +7,8 @@ import sys
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "examples"))
 import ablation  # noqa: E402
 
+from shelf_env import evaluation as ev  # noqa: E402
+
 
 def row(name: str, seed: int, sr_train: float) -> dict:
     metrics = {"scenes": 10, "sorted": int(sr_train / 10), "sr": sr_train, "actions_per_success": 2.5,
@@ -22,9 +24,11 @@ def test_rows_on_disk_are_skipped_and_reported(tmp_path, monkeypatch, capsys):
     rows.mkdir()
     (rows / "recipe_s0.json").write_text(json.dumps(row("recipe", 0, 96.0)))
     (rows / "no-demos_s0.json").write_text(json.dumps(row("no-demos", 0, 40.0)))
-    hd = {"train": {"sr": 100.0, "actions_per_success": 2.2, "noop_share": 0.0},
-          "ycb": {"sr": 90.0, "actions_per_success": 2.4, "noop_share": 0.0}}
-    (rows / "h-d_10.json").write_text(json.dumps(hd))
+    # H-d's cells on disk (as examples/check_recipe.py writes them): 10/10 in 2.2 actions, 9/10 on YCB
+    for object_set, actions, successes in (("train", [2] * 8 + [3] * 2, 10), ("ycb", [2] * 10, 9)):
+        ev.save_cell(ev.cell_path(tmp_path, "h-d", object_set, 3, ablation.HELDOUT_SEED, 10),
+                     [ev.EpisodeRecord("h-d", object_set, 3, ablation.HELDOUT_SEED, run, run < successes, a, 3, False)
+                      for run, a in enumerate(actions)])
     monkeypatch.setattr(ablation, "run_row", lambda *a, **k: (_ for _ in ()).throw(AssertionError("trained")))
     doc = tmp_path / "learning.md"
     doc.write_text(f"intro\n{ablation.BEGIN}\nold table\n{ablation.END}\noutro\n")
