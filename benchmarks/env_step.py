@@ -38,21 +38,25 @@ def run(n: int, steps: int, seed: int) -> tuple[float, float, float]:
     env = ShelfSortEnv(num_objects=n, max_actions=10_000)
     client = env.client
     physics = Timed(lambda: pb.stepSimulation(physicsClientId=client))
-    env.robot.step = lambda: (physics(), setattr(env.robot, "physics_steps", env.robot.physics_steps + 1))
     render = Timed(env.camera.render)
     env.camera.render = render
+
+    def reset(**kwargs) -> None:
+        env.reset(**kwargs)  # every reset builds a new robot (history-free episodes): time its steps
+        robot = env.robot
+        robot.step = lambda: (physics(), setattr(robot, "physics_steps", robot.physics_steps + 1))
+
     rng = np.random.default_rng(seed)
-    env.reset(seed=seed)
+    reset(seed=seed)
     wall = floor = 0.0
     done = 0
     while done < steps:
         cells = np.argwhere(env._semantic[0] >= 0)
         if len(cells) == 0:
-            env.reset()
+            reset()
             continue
         r, c = cells[rng.integers(len(cells))]
-        m = int(rng.integers(len(env.map_names)))
-        action = m * env.rows * env.cols + r * env.cols + c
+        action = env.codec.encode(env.map_names[int(rng.integers(len(env.map_names)))], int(r), int(c))
         physics.total = render.total = 0.0
         t = time.perf_counter()
         _, _, terminated, truncated, _ = env.step(action)
@@ -60,7 +64,7 @@ def run(n: int, steps: int, seed: int) -> tuple[float, float, float]:
         floor += physics.total + render.total
         done += 1
         if terminated or truncated:
-            env.reset()
+            reset()
     env.close()
     return steps / wall, wall / steps, wall / floor
 

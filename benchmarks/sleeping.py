@@ -24,12 +24,12 @@ from shelf_env.heuristics import DistanceHeuristic
 
 def play(env: gym.Env, seed: int) -> tuple[float, int, int, tuple[bool, int, bool]]:
     """One H-d episode (the evaluation's own loop): (seconds, actions, physics steps, (success, actions, fell))."""
-    robot = env.unwrapped.robot
-    steps0 = robot.physics_steps
     start = time.perf_counter()
     out = run_episode(env, DistanceHeuristic(env), seed)
     seconds = time.perf_counter() - start
-    return seconds, out["actions"], robot.physics_steps - steps0, (out["success"], out["actions"], out["fell"])
+    # the reset built this episode's robot (history-free episodes): its counter holds the episode's steps
+    steps = env.unwrapped.robot.physics_steps
+    return seconds, out["actions"], steps, (out["success"], out["actions"], out["fell"])
 
 
 def main() -> None:

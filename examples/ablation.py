@@ -30,6 +30,7 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import train  # noqa: E402
 
+from sb3_pixeldqn.files import write_atomically, write_json_atomically, write_text_atomically  # noqa: E402
 from shelf_env import evaluation as ev  # noqa: E402
 from shelf_env.training import PRESETS  # noqa: E402
 
@@ -90,7 +91,7 @@ def run_row(row: str, seed: int, minutes: float, start_objects: int, scenes: int
         "gradient_steps": int(model._n_updates), "curriculum": progress["curriculum"], "heldout": metrics,
     }
     # the row's checkpoint stays in runs/; only its numbers are committed
-    ev.write_json_atomic(out / "rows" / f"{row_key(row, seed)}.json", result)
+    write_json_atomically(out / "rows" / f"{row_key(row, seed)}.json", result)
     return result
 
 
@@ -132,7 +133,7 @@ def report(out: pathlib.Path, scenes: int) -> str:
                      f"{100 * hd['ycb']['noop_share']:.1f} % | - | - | - |")
         plot_curves(rows, out / "learning_curves.png")
     table = "\n".join(lines)
-    (out / "ablation.md").write_text(table + "\n")
+    write_text_atomically(out / "ablation.md", table + "\n")
     update_doc(DOC, table)
     return table
 
@@ -149,7 +150,7 @@ def update_doc(doc: pathlib.Path, table: str) -> None:
     if BEGIN not in text or END not in text:
         return
     head, rest = text.split(BEGIN, 1)
-    doc.write_text(head + BEGIN + "\n" + table + "\n" + END + rest.split(END, 1)[1])
+    write_text_atomically(doc, head + BEGIN + "\n" + table + "\n" + END + rest.split(END, 1)[1])
 
 
 def plot_curves(rows: list[dict[str, Any]], png: pathlib.Path) -> None:
@@ -177,7 +178,7 @@ def plot_curves(rows: list[dict[str, Any]], png: pathlib.Path) -> None:
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
+    write_atomically(png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     plt.close(fig)
 
 

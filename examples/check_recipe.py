@@ -17,6 +17,7 @@ import argparse
 import pathlib
 from concurrent.futures import ProcessPoolExecutor
 
+from sb3_pixeldqn.files import write_json_atomically
 from shelf_env import evaluation as ev
 
 N = 3
@@ -54,7 +55,7 @@ def main(argv: list[str] | None = None) -> dict:
     report = {"checkpoint": args.checkpoint, "num_objects": N, "heldout_seed": ev.HELDOUT_SEED,
               "scenes": args.scenes, "learned": learned, "h-d": hd, "criteria": criteria,
               "passed": all(criteria.values())}
-    ev.write_json_atomic(args.out, report)
+    write_json_atomically(args.out, report)
     for oset in ("train", "ycb"):
         a, b = learned[oset], hd[oset]
         print(f"{oset:5s}: learned {a['sorted']}/{a['scenes']} sorted, {a['actions_per_success']:.2f} actions/success, "

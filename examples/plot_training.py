@@ -19,6 +19,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from sb3_pixeldqn.files import write_atomically  # noqa: E402
+
 
 def read_episodes(path: pathlib.Path) -> dict[str, np.ndarray]:
     with open(path, newline="") as f:
@@ -74,7 +76,7 @@ def main() -> None:
     fig.suptitle("PixelDoubleDQN (P+S) curriculum on ShelfSort-v0, CPU")
     fig.tight_layout()
     png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
+    write_atomically(png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     print("\n".join(stage_summary(ep)))
     print(f"wrote {png}")
 

@@ -28,7 +28,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import PixelDoubleDQN
-from shelf_env.evaluation import write_json_atomic
+from sb3_pixeldqn.files import write_json_atomically, write_text_atomically
 from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_curriculum, make_env, make_model
 
 EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
@@ -147,7 +147,7 @@ class BudgetAndCheckpoint(BaseCallback):
             timesteps=self.model.num_timesteps,
             curriculum=self.model.curriculum_state,
         )
-        write_json_atomic(self.out / "progress.json", self.progress)
+        write_json_atomically(self.out / "progress.json", self.progress)
         self.last_checkpoint = time.monotonic()
         print(f"[{self.progress['wall_seconds'] / 60:6.1f} min] checkpoint at step {self.model.num_timesteps}, "
               f"N = {self.model.curriculum_state['value']}", flush=True)
@@ -156,11 +156,10 @@ class BudgetAndCheckpoint(BaseCallback):
 def truncate_csv(path: pathlib.Path, rows: int) -> None:
     """Keep the header and the first ``rows`` episode rows (those covered by the checkpoint)."""
     if not path.exists():
-        with open(path, "w", newline="") as f:
-            csv.DictWriter(f, fieldnames=EPISODE_FIELDS).writeheader()
+        write_text_atomically(path, ",".join(EPISODE_FIELDS) + "\r\n")  # csv's header line
         return
     lines = path.read_text().splitlines(keepends=True)
-    path.write_text("".join(lines[: rows + 1]))
+    write_text_atomically(path, "".join(lines[: rows + 1]))
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -116,7 +116,7 @@ class HindsightRelabelReplayBuffer(ReplayBuffer):
         self.demonstrations: HindsightRelabelReplayBuffer | None = None
 
     # ------------------------------------------------------------------ adding
-    def add(
+    def add(  # type: ignore[override]  # SB3's add plus the next masks; returns per-env no-op flags
         self,
         obs: np.ndarray,
         next_obs: np.ndarray,

@@ -125,7 +125,7 @@ class CurriculumCallback(BaseCallback):
             self.outcomes.clear()
             self.history = [[self.model.num_timesteps, self.value]]
         self._stale = np.zeros(self.training_env.num_envs, dtype=bool)
-        self._last_check = self.greedy_history[-1][0] if self.greedy_history else self.model.num_timesteps
+        self._last_check = int(self.greedy_history[-1][0]) if self.greedy_history else self.model.num_timesteps
         self._save_state()
 
     def _on_training_start(self) -> None:

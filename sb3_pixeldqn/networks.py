@@ -91,7 +91,3 @@ def rotate(images: th.Tensor, degrees: int) -> th.Tensor:
         return th.flip(images, dims=(-2, -1))
     raise ValueError(f"rotation {degrees} is not supported; use one of {SUPPORTED_ROTATIONS}")
 
-
-def rotated_q_map(fcn: ResidualFCN, images: th.Tensor, degrees: int) -> th.Tensor:
-    """Q-map of one rotated view (Fig. 5): rotate the input, run the FCN, rotate the map back."""
-    return rotate(fcn(rotate(images, degrees)), -degrees % 360)

@@ -37,7 +37,6 @@ its allowed pixels.
 
 from __future__ import annotations
 
-import os
 import pathlib
 import pickle
 import zipfile
@@ -59,6 +58,7 @@ from stable_baselines3.common.utils import polyak_update
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer, TransitionBatch
+from sb3_pixeldqn.files import write_atomically
 from sb3_pixeldqn.policies import FCNPolicy, PixelQNetwork, check_action_masks, describe_layout, masked_argmax
 
 SelfPixelDoubleDQN = TypeVar("SelfPixelDoubleDQN", bound="PixelDoubleDQN")
@@ -137,6 +137,8 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"FCNPolicy": FCNPolicy}
     policy: FCNPolicy
     q_net: PixelQNetwork
+    observation_space: spaces.Box
+    action_space: spaces.Discrete
     q_net_target: PixelQNetwork
 
     def __init__(
@@ -241,7 +243,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         self.q_net = self.policy.q_net
         self.q_net_target = self.policy.q_net_target
         self.exploration_rate = self._epsilon(self.stage_timesteps)
-        if not issubclass(self.replay_buffer_class, HindsightRelabelReplayBuffer):
+        if self.replay_buffer_class is None or not issubclass(self.replay_buffer_class, HindsightRelabelReplayBuffer):
             raise ValueError(
                 f"PixelDoubleDQN needs a HindsightRelabelReplayBuffer (or a subclass), got {self.replay_buffer_class}"
             )
@@ -290,10 +292,6 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         #: observation (anything that resets the envs replaces ``_last_obs``).
         self._step_masks: tuple[Any, np.ndarray] | None = None
 
-    def _uses_masks(self) -> bool:
-        """Whether greedy collection and the target argmax use the env's masks (decided per env)."""
-        return self._use_masks
-
     def _current_masks(self) -> np.ndarray:
         """``(n_envs, n_actions)`` bool masks of the training envs now, checked."""
         assert self.env is not None
@@ -314,10 +312,22 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             next_q = self.policy.q_values_at(self.q_net_target, next_images, best)
             return rewards.reshape(-1) + (1.0 - dones.reshape(-1)) * self.gamma * next_q
 
-    def pixel_loss(self, obs: th.Tensor, actions: th.Tensor, targets: th.Tensor) -> th.Tensor:
-        """Huber loss (Eq. 3) on the executed pixel of the executed map, mean over the batch."""
-        q = self.policy.q_values_at(self.q_net, self.policy.images(obs), actions)
-        return F.smooth_l1_loss(q, targets)
+    def pixel_loss(self, obs: th.Tensor, actions: th.Tensor, targets: th.Tensor,
+                   demo_rows: th.Tensor | None = None) -> tuple[th.Tensor, th.Tensor | None]:
+        """The training loss of one batch: (total, margin part or None).
+
+        Huber loss (Eq. 3) on the executed pixel of the executed map, mean over the batch, plus
+        ``margin_weight`` times the large-margin loss (`margin_loss`) of the rows in ``demo_rows``
+        (bool, demonstration transitions), whose full Q-maps are computed for it.
+        """
+        if demo_rows is None or self.margin_weight <= 0:
+            demo_rows = th.zeros(obs.shape[0], dtype=th.bool, device=obs.device)
+        q, q_demo = self.policy.q_for_loss(self.policy.images(obs), actions, demo_rows)
+        loss = F.smooth_l1_loss(q, targets)
+        if not demo_rows.any():
+            return loss, None
+        margin = self.margin_loss(q_demo, actions[demo_rows])
+        return loss + self.margin_weight * margin, margin
 
     def margin_loss(self, q_all: th.Tensor, actions: th.Tensor) -> th.Tensor:
         """Strict large-margin loss of demonstrations (SDQfD), mean over rows ``(B, n_actions)``.
@@ -375,12 +385,8 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             targets = self.double_dqn_target(th.as_tensor(batch.next_observations, device=self.device),
                                              th.as_tensor(batch.rewards, device=self.device),
                                              th.as_tensor(batch.dones, device=self.device), masks)
-            demo_rows = th.as_tensor(batch.is_demo, device=self.device) & (self.margin_weight > 0)
-            q, q_demo = self.policy.q_for_loss(self.policy.images(obs), actions, demo_rows)
-            loss = F.smooth_l1_loss(q, targets)
-            if demo_rows.any():
-                margin = self.margin_loss(q_demo, actions[demo_rows])
-                loss = loss + self.margin_weight * margin
+            loss, margin = self.pixel_loss(obs, actions, targets, th.as_tensor(batch.is_demo, device=self.device))
+            if margin is not None:
                 margin_losses.append(margin.item())
             self.policy.optimizer.zero_grad(set_to_none=True)
             loss.backward()
@@ -420,7 +426,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         return actions, actions
 
     def _exploratory_actions(self, explore: np.ndarray, masks: np.ndarray | None) -> np.ndarray:
-        n_actions = int(self.action_space.n)  # type: ignore[attr-defined]
+        n_actions = int(self.action_space.n)
         if masks is None:
             return np.random.randint(n_actions, size=int(explore.sum()))
         return np.array([draw_masked_action(masks[i], self.policy.n_maps, np.random) for i in np.flatnonzero(explore)],
@@ -470,11 +476,12 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         """SB3's store (terminal observations of auto-reset envs put back), plus the next-state masks."""
         next_obs = self._final_observations(new_obs, dones, infos)
         masks = self._next_masks(new_obs, dones, infos)
-        noops = replay_buffer.add(np.asarray(self._last_obs), next_obs, buffer_action, reward, dones, infos,  # type: ignore[call-arg]
+        assert isinstance(replay_buffer, HindsightRelabelReplayBuffer)  # _setup_model checks the class
+        noops = replay_buffer.add(np.asarray(self._last_obs), next_obs, buffer_action, reward, dones, infos,
                                   next_action_masks=masks)
         self._noop_history.extend(noops)
-        self._last_obs = new_obs  # type: ignore[assignment]
-        self._last_original_obs = new_obs  # type: ignore[assignment]
+        self._last_obs = new_obs
+        self._last_original_obs = new_obs
 
     def collect_demonstrations(self, demo_policy: Any, n_steps: int, capacity: int | None = None,
                                progress: Callable[[int], None] | None = None) -> dict[str, float]:
@@ -498,7 +505,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         assert isinstance(buffer, HindsightRelabelReplayBuffer)  # _setup_model checks the class
         env = self.env
         n_actions = int(self.action_space.n)
-        obs = env.reset()
+        obs = np.asarray(env.reset())  # check_spaces allows Box observations only
         episodes = successes = 0
         for step in range(n_steps):
             actions = np.asarray(demo_policy.predict(obs, deterministic=True)[0]).reshape(-1).astype(np.int64)
@@ -513,7 +520,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             buffer.add_demonstration(obs, self._final_observations(new_obs, dones, infos), actions, rewards, dones,
                                      infos, self._next_masks(new_obs, dones, infos),
                                      capacity=capacity or 2 * n_steps * env.num_envs)
-            obs = new_obs
+            obs = np.asarray(new_obs)
             if progress is not None:
                 progress(step + 1)
         self.demo_timesteps += n_steps * env.num_envs
@@ -545,7 +552,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             flat = action.reshape(-1)
             explore = np.random.rand(flat.size) < self.exploration_rate
             if action_masks is None:
-                flat[explore] = np.random.randint(int(self.action_space.n), size=int(explore.sum()))  # type: ignore[attr-defined]
+                flat[explore] = np.random.randint(int(self.action_space.n), size=int(explore.sum()))
             else:  # the policy's predict has validated them
                 flat[explore] = self._exploratory_actions(explore, np.asarray(action_masks).reshape(flat.size, -1))
         return action, state
@@ -580,7 +587,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         """Save to ``path`` (``.zip`` added if it has no suffix) atomically: a crash leaves the old file intact."""
         if not isinstance(path, (str, pathlib.Path)):
             return super().save(path, exclude=exclude, include=include)
-        _write_atomically(
+        write_atomically(
             _with_suffix(path, ".zip"), lambda tmp: super(PixelDoubleDQN, self).save(tmp, exclude, include)
         )
 
@@ -588,10 +595,10 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         """Pickle the replay buffer (filled part only) to ``path`` (``.pkl`` added if no suffix), atomically."""
         if not isinstance(path, (str, pathlib.Path)):
             return super().save_replay_buffer(path)
-        _write_atomically(_with_suffix(path, ".pkl"), lambda tmp: super(PixelDoubleDQN, self).save_replay_buffer(tmp))
+        write_atomically(_with_suffix(path, ".pkl"), lambda tmp: super(PixelDoubleDQN, self).save_replay_buffer(tmp))
 
     @classmethod
-    def load(  # type: ignore[override]
+    def load(
         cls: type[SelfPixelDoubleDQN],
         path: str | pathlib.Path | Any,
         env: GymEnv | None = None,
@@ -640,14 +647,3 @@ def draw_masked_action(mask: np.ndarray, n_maps: int, rng: Any) -> int:
 def _with_suffix(path: str | pathlib.Path, suffix: str) -> pathlib.Path:
     path = pathlib.Path(path)
     return path if path.suffix else path.with_suffix(suffix)
-
-
-def _write_atomically(final: pathlib.Path, write: Any) -> None:
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = final.with_name(f".{final.name}.partial")
-    try:
-        write(tmp)
-        os.replace(tmp, final)
-    finally:
-        if tmp.exists():
-            tmp.unlink()

@@ -122,6 +122,8 @@ class FCNPolicy(BasePolicy):
 
     q_net: PixelQNetwork
     q_net_target: PixelQNetwork
+    observation_space: spaces.Box
+    action_space: spaces.Discrete
 
     def __init__(
         self,
@@ -148,7 +150,9 @@ class FCNPolicy(BasePolicy):
             optimizer_class=optimizer_class,
             optimizer_kwargs=optimizer_kwargs,
         )
-        self.widths = tuple(int(w) for w in widths)
+        if len(widths) != 3:
+            raise ValueError(f"widths must be three channel counts (one per residual stage), got {widths!r}")
+        self.widths = (int(widths[0]), int(widths[1]), int(widths[2]))
         if no_grad_chunk < 1:
             raise ValueError(f"no_grad_chunk must be >= 1, got {no_grad_chunk}")
         self.no_grad_chunk = int(no_grad_chunk)
@@ -164,8 +168,9 @@ class FCNPolicy(BasePolicy):
         self.q_net_target.requires_grad_(False)
         self.q_net_target.train(False)
         if self.channels_last:
-            self.q_net.to(memory_format=th.channels_last)
-            self.q_net_target.to(memory_format=th.channels_last)
+            # torch's stubs lack Module.to's memory_format keyword, which torch documents and accepts
+            self.q_net.to(memory_format=th.channels_last)  # type: ignore[call-overload]
+            self.q_net_target.to(memory_format=th.channels_last)  # type: ignore[call-overload]
         self.optimizer = self.optimizer_class(  # type: ignore[call-arg]
             self.q_net.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs
         )
@@ -209,7 +214,7 @@ class FCNPolicy(BasePolicy):
         q = self.all_q_maps(self.q_net, self.images(observation)).flatten(1)
         return masked_argmax(q, action_masks)
 
-    def predict(  # type: ignore[override]
+    def predict(
         self,
         observation: np.ndarray | dict[str, np.ndarray],
         state: tuple[np.ndarray, ...] | None = None,
@@ -225,13 +230,14 @@ class FCNPolicy(BasePolicy):
         """
         self.set_training_mode(False)
         obs_tensor, vectorized_env = self.obs_to_tensor(observation)
+        assert isinstance(obs_tensor, th.Tensor)  # check_spaces allows Box observations only
         masks = None
         if action_masks is not None:
             masks = th.as_tensor(check_action_masks(action_masks, int(self.action_space.n), obs_tensor.shape[0]),
                                  device=self.device)
         with th.no_grad():
-            actions = self._predict(obs_tensor, deterministic=deterministic, action_masks=masks)
-        actions = actions.cpu().numpy().reshape((-1,))
+            chosen = self._predict(obs_tensor, deterministic=deterministic, action_masks=masks)
+        actions = chosen.cpu().numpy().reshape((-1,))
         if not vectorized_env:
             actions = actions.squeeze(axis=0)
         return actions, state

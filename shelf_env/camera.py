@@ -20,6 +20,7 @@ import numpy as np
 import pybullet as pb
 
 from shelf_env import params
+from shelf_env.actions import cell_centres
 
 FREE = -1
 OCCLUDED = -2
@@ -43,13 +44,6 @@ class CameraConfig:
     near: float = 0.05
     far: float = 3.0
     depth_tolerance: float = 0.01  # metres: "sees this point" when depths agree this well
-
-
-def cell_centres(rows: int, cols: int, pixel_size: float) -> tuple[np.ndarray, np.ndarray]:
-    """Cabinet x of every heightmap row (back -> front) and y of every column (left -> right)."""
-    x = params.CABINET_DEPTH - (np.arange(rows) + 0.5) * pixel_size
-    y = params.CABINET_WIDTH / 2 - (np.arange(cols) + 0.5) * pixel_size
-    return x, y
 
 
 def _look_at(cfg: CameraConfig) -> np.ndarray:
@@ -120,15 +114,6 @@ class HeightmapCamera:
         ui, vi = np.floor(u).astype(int), np.floor(v).astype(int)
         ok = (z > 0) & (ui >= 0) & (ui < self.cfg.width) & (vi >= 0) & (vi < self.cfg.height)
         return np.where(ok, vi * self.cfg.width + ui, -1), z
-
-    def cell_of(self, x: float, y: float) -> tuple[int, int]:
-        """(row, col) of the heightmap cell containing cabinet point (x, y)."""
-        row = int(np.clip((params.CABINET_DEPTH - x) // self.pixel_size, 0, self.rows - 1))
-        col = int(np.clip((params.CABINET_WIDTH / 2 - y) // self.pixel_size, 0, self.cols - 1))
-        return row, col
-
-    def cell_centre(self, row: int, col: int) -> tuple[float, float]:
-        return float(self.cell_x[row]), float(self.cell_y[col])
 
     # ---- capture ---------------------------------------------------------------------
     def render(self) -> tuple[np.ndarray, np.ndarray]:

@@ -39,36 +39,52 @@ step (see `shelf_env.world`).
 from __future__ import annotations
 
 from numbers import Integral
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import pybullet as pb
 
 from shelf_env import params
+from shelf_env.actions import PRIMITIVES, ActionCodec, clip_target, map_names
 from shelf_env.camera import CLASS_RGB, CameraConfig, HeightmapCamera, recolour, region_masks
 from shelf_env.objects import OBJECT_SETS, ObjectSpec, sample_specs
 from shelf_env.placement import place_position
 from shelf_env.robot import Primitives, Robot
 from shelf_env.world import Region, World, sample_regions
 
-PRIMITIVES = ("pick", "push")
-ACTION_X_MAX = params.CABINET_DEPTH - 0.02
-ACTION_Y_MAX = params.CABINET_WIDTH / 2 - 0.008
 SPAWN_TRIES = 100
-
-
-def map_names(primitives: tuple[str, ...]) -> list[str]:
-    """Q-map layout for a primitive set: "push" contributes push_left then push_right."""
-    names: list[str] = []
-    for p in primitives:
-        names += ["push_left", "push_right"] if p == "push" else [p]
-    return names
+__all__ = ["PRIMITIVES", "ShelfSortEnv", "map_names"]
 
 
 class ShelfSortEnv(gym.Env):
     """Gymnasium env of the confined-shelf sorting task (see module docstring)."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
+    observation_space: gym.spaces.Box
+    action_space: gym.spaces.Discrete
+    client: int | None
+    max_objects: int
+    num_objects: int
+    object_set: str
+    primitives: tuple[str, ...]
+    map_names: list[str]
+    max_actions: int
+    render_mode: str | None
+    sleeping: bool
+    world: World
+    robot: Robot
+    primitive_runner: Primitives
+    camera: HeightmapCamera
+    codec: ActionCodec
+    rows: int
+    cols: int
+    action_count: int
+    num_unsorted_initial: int
+    episode_num_objects: int
+    _regions_mask: np.ndarray
+    _semantic: tuple[np.ndarray, np.ndarray] | None
+    _obs: np.ndarray | None
 
     def __init__(
         self,
@@ -104,13 +120,14 @@ class ShelfSortEnv(gym.Env):
         self.max_actions = int(max_actions)
         self.render_mode = render_mode
 
+        self.sleeping = bool(sleeping)
         self.client = pb.connect(pb.DIRECT)
-        self.world = World(self.client, sleeping=sleeping)
-        self.robot = Robot(self.client)
+        self._build_world()
         self.camera = HeightmapCamera(self.client, camera, pixel_size, hidden_bodies=self.world.decorative,
                                       wall_uids=self.world.wall_uids)
-        self.primitive_runner = Primitives(self.robot, lambda: {o.uid for o in self.world.objects})
-        self.rows, self.cols = self.camera.rows, self.camera.cols
+        #: The action codec (`shelf_env.actions`): index <-> (map, row, col) <-> cabinet (x, y).
+        self.codec = ActionCodec(tuple(self.map_names), self.camera.rows, self.camera.cols, pixel_size)
+        self.rows, self.cols = self.codec.rows, self.codec.cols
         self.observation_space = gym.spaces.Box(0, 255, (4, self.rows, self.cols), dtype=np.uint8)
         self.action_space = gym.spaces.Discrete(len(self.map_names) * self.rows * self.cols)
         self._regions_mask = np.zeros((params.NUM_CLASSES, self.rows, self.cols), dtype=bool)
@@ -121,10 +138,10 @@ class ShelfSortEnv(gym.Env):
         self.episode_num_objects = 0
 
     # ---- configuration ----------------------------------------------------------------
-    def _check_num_objects(self, n) -> int:
+    def _check_num_objects(self, n: Any) -> int:
         if isinstance(n, bool) or not isinstance(n, Integral):
             raise ValueError(f"num_objects must be an integer, got {n!r}")
-        if not 1 <= n <= self.max_objects:
+        if not 1 <= int(n) <= self.max_objects:
             raise ValueError(f"num_objects must be in [1, {self.max_objects}], got {n}")
         return int(n)
 
@@ -146,6 +163,28 @@ class ShelfSortEnv(gym.Env):
         self._spawn(self.num_objects)
         return self._begin_episode()
 
+    def _build_world(self) -> None:
+        """An empty simulation with the cabinet and the robot at home, as in a fresh env.
+
+        Called by every `reset` and `set_scene`, which is what makes episodes history-free: after
+        ``resetSimulation`` the cabinet, the robot and then the objects are created in the same
+        order, so they get the same body ids, and no contact cache, solver warm-start, sleeping
+        state or collision shape survives from earlier episodes. Bullet is deterministic given
+        the same bodies created in the same order, so an episode's observations, rewards and
+        infos depend only on (scene, actions). It costs ~10 ms per reset
+        (``benchmarks/env_step.py --reset``).
+        """
+        if self.client is None:
+            raise RuntimeError("this ShelfSortEnv is closed")
+        pb.resetSimulation(physicsClientId=self.client)
+        self.world = World(self.client, sleeping=self.sleeping)
+        self.robot = Robot(self.client)
+        self.primitive_runner = Primitives(self.robot, lambda: {o.uid for o in self.world.objects})
+        camera = getattr(self, "camera", None)
+        if camera is not None:  # same bodies in the same order: same ids, but say so rather than assume
+            camera.hidden_bodies = self.world.decorative
+            camera.wall_uids = np.asarray(self.world.wall_uids, dtype=np.int64)
+
     def _clear_scene(self) -> None:
         self.robot.release()
         self.robot.go_home()
@@ -164,6 +203,7 @@ class ShelfSortEnv(gym.Env):
 
     def _spawn(self, n: int) -> None:
         rng = self.np_random
+        self._build_world()
         for _ in range(SPAWN_TRIES):
             self._clear_scene()
             specs = sample_specs(self.object_set, n, rng)
@@ -203,7 +243,7 @@ class ShelfSortEnv(gym.Env):
         bad = [cls for _, cls, *_ in objects if not 0 <= cls < params.NUM_CLASSES]
         if bad:
             raise ValueError(f"class must be in [0, {params.NUM_CLASSES}), got {bad[0]}")
-        self._clear_scene()
+        self._build_world()
         self.world.regions = list(regions)
         for spec, cls, x, y, yaw in objects:
             self._add_object(spec, int(cls), x, y, yaw)
@@ -219,26 +259,22 @@ class ShelfSortEnv(gym.Env):
         self._semantic = self.camera.semantic_map(uids)
         return recolour(*self._semantic, self._class_of_uid(), self._regions_mask)
 
+    def _observed_semantic(self) -> tuple[np.ndarray, np.ndarray]:
+        """The semantic map (cell uid, height) of the last observation."""
+        if self._semantic is None:
+            raise RuntimeError("call reset() first")
+        return self._semantic
+
     def decode_action(self, action) -> tuple[str, int, int]:
-        """(map name, row, col) of a flat action index; ValueError if it is not one."""
-        if isinstance(action, np.ndarray):
-            if action.size != 1:
-                raise ValueError(f"action must be a single integer, got an array of shape {action.shape}")
-            action = action.reshape(()).item()
-        if isinstance(action, bool) or not isinstance(action, Integral):
-            raise ValueError(f"action must be an integer, got {action!r}")
-        if not 0 <= action < self.action_space.n:
-            raise ValueError(f"action {action} out of range [0, {self.action_space.n})")
-        m, rest = divmod(int(action), self.rows * self.cols)
-        row, col = divmod(rest, self.cols)
-        return self.map_names[m], row, col
+        """(map name, row, col) of a flat action index; ValueError if it is not one (`ActionCodec.decode`)."""
+        return self.codec.decode(action)
 
     def step(self, action):
-        if self._obs is None:
+        prev_semantic = self._semantic
+        if self._obs is None or prev_semantic is None:
             raise RuntimeError("call reset() before step()")
         name, row, col = self.decode_action(action)
-        prev_semantic = self._semantic
-        x, y = self._clip_target(*self.camera.cell_centre(row, col))
+        x, y = clip_target(*self.codec.cell_centre(row, col))
         self.world.sleep_resting()
         if name == "pick":
             surface = float(prev_semantic[1][row, col])
@@ -273,7 +309,7 @@ class ShelfSortEnv(gym.Env):
             relabel = self._class_of_uid(region)
             info["relabelled"] = {
                 "obs": recolour(*prev_semantic, relabel, self._regions_mask),
-                "next_obs": recolour(*self._semantic, relabel, self._regions_mask),
+                "next_obs": recolour(*self._observed_semantic(), relabel, self._regions_mask),
                 "reward": params.REWARD_SORTED,
                 "terminated": True,
             }
@@ -319,18 +355,14 @@ class ShelfSortEnv(gym.Env):
         into a side wall and left outside the cabinet.
         """
         obj = next(o for o in self.world.objects if o.uid == uid)
+        assert self._semantic is not None  # a primitive runs only after reset has observed the scene
         cell_uid, _ = self._semantic
         aabb_min, aabb_max = (np.asarray(v) for v in pb.getAABB(uid, physicsClientId=self.client))
         footprint = (aabb_max[0] - aabb_min[0], aabb_max[1] - aabb_min[1])
         centre_x, centre_y = place_position(cell_uid, self._class_of_uid(), self._regions_mask[obj.cls],
                                             obj.cls, footprint, self.camera.pixel_size, ignore_uid=uid)
         offset = (aabb_min[:2] + aabb_max[:2]) / 2 - self.robot.tcp_position()[:2]
-        return self._clip_target(centre_x - offset[0], centre_y - offset[1])
-
-    @staticmethod
-    def _clip_target(x: float, y: float) -> tuple[float, float]:
-        """Keep a tool target where the blade's tip and thickness clear the walls."""
-        return float(np.clip(x, 0.0, ACTION_X_MAX)), float(np.clip(y, -ACTION_Y_MAX, ACTION_Y_MAX))
+        return clip_target(centre_x - offset[0], centre_y - offset[1])
 
     def _info(self, primitive: str | None, fell: bool, region: np.ndarray, resting: np.ndarray) -> dict:
         """Info dict from the region index and rest flag of every object still in the world."""

@@ -28,6 +28,7 @@ import gymnasium as gym
 import numpy as np
 
 from sb3_pixeldqn.buffers import unchanged
+from sb3_pixeldqn.files import write_atomically, write_json_atomically
 from shelf_env import params
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
 
@@ -36,7 +37,6 @@ HEURISTICS = {"h-d": DistanceHeuristic, "h-a": AccessibilityHeuristic}
 #: run, greedy curriculum check or tuning probe draws scenes from it.
 HELDOUT_SEED = 1000
 NAMED_POLICIES = (*HEURISTICS, "random")
-N_RANGE = (3, 14)
 
 
 @dataclass(frozen=True)
@@ -149,7 +149,7 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
     masked = takes_action_masks(policy)
     noops = 0
     while True:
-        kwargs = {"action_masks": env.unwrapped.action_masks()} if masked else {}
+        kwargs = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
         action, _ = policy.predict(obs, deterministic=True, **kwargs)
         next_obs, _, terminated, truncated, info = env.step(int(np.asarray(action).reshape(-1)[0]))
         noops += unchanged(obs, next_obs)
@@ -222,19 +222,12 @@ def summarize(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
 
 
 # ---------------------------------------------------------------- files
-def write_json_atomic(path: pathlib.Path, data: Any) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.partial")
-    tmp.write_text(json.dumps(data, indent=1, allow_nan=True))
-    os.replace(tmp, path)
-
-
 def cell_path(out: pathlib.Path, policy: str, object_set: str, n: int, seed: int, runs: int) -> pathlib.Path:
     return out / "cells" / f"{policy_label(policy)}__{object_set}__N{n:02d}__seed{seed}__runs{runs}.json"
 
 
 def save_cell(path: pathlib.Path, records: list[EpisodeRecord]) -> None:
-    write_json_atomic(path, [asdict(r) for r in records])
+    write_json_atomically(path, [asdict(r) for r in records])
 
 
 def load_cell(path: pathlib.Path) -> list[EpisodeRecord]:
@@ -256,17 +249,19 @@ def write_results(out: pathlib.Path, records: list[EpisodeRecord], config: dict[
     """``results.csv`` (the summary) and ``results.json`` (configuration, summary, per-seed metrics)."""
     rows = summarize(records)
     out.mkdir(parents=True, exist_ok=True)
-    tmp = out / ".results.csv.partial"
-    with open(tmp, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in row.items()})
-    os.replace(tmp, out / "results.csv")
-    per_seed = {}
+
+    def write_csv(tmp: pathlib.Path) -> None:
+        with open(tmp, "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+            writer.writeheader()
+            for row in rows:
+                writer.writerow({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in row.items()})
+
+    write_atomically(out / "results.csv", write_csv)
+    per_seed: dict[str, list[EpisodeRecord]] = {}
     for r in records:
         per_seed.setdefault(f"{r.policy}|{r.object_set}|{r.num_objects}|{r.seed}", []).append(r)
-    write_json_atomic(out / "results.json", {
+    write_json_atomically(out / "results.json", {
         "config": config,
         "summary": rows,
         "per_seed": {k: seed_metrics(v) for k, v in sorted(per_seed.items())},
@@ -312,6 +307,6 @@ def plot_metrics(rows: list[dict[str, Any]], png: pathlib.Path, object_set: str 
     fig.suptitle(title)
     fig.tight_layout()
     png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
+    write_atomically(png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     plt.close(fig)
     return labels

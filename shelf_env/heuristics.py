@@ -133,6 +133,7 @@ class ObservationPolicy:
     """SB3's ``predict`` over one observation or a batch, for policies that act on one at a time."""
 
     observation_space: gym.spaces.Box
+    action_space: gym.spaces.Discrete
 
     def predict(
         self,
@@ -164,13 +165,13 @@ class PickHeuristic(ObservationPolicy):
             raise ValueError(f"{type(self).__name__} needs the pick primitive; the env has {base.map_names}")
         self.observation_space = base.observation_space
         self.action_space = base.action_space
-        self.pick_map = base.map_names.index("pick")
+        self.codec = base.codec
         self.rows, self.cols = base.rows, base.cols
         self.pixel_size = base.camera.pixel_size
         self.margin_cells = int(round(CUP_MARGIN_M / self.pixel_size))
 
     def _pick(self, row: int, col: int) -> int:
-        return self.pick_map * self.rows * self.cols + int(row) * self.cols + int(col)
+        return self.codec.encode("pick", int(row), int(col))
 
     def _act(self, obs: np.ndarray) -> int:
         view = ObservationView.from_observation(obs, self.margin_cells)
@@ -227,6 +228,10 @@ class RandomPolicy(ObservationPolicy):
     """Uniform over all actions of the env's layout: the floor every policy must beat."""
 
     def __init__(self, env: gym.Env, seed: int | None = None) -> None:
+        if not isinstance(env.action_space, gym.spaces.Discrete) or not isinstance(env.observation_space,
+                                                                                    gym.spaces.Box):
+            raise ValueError(f"RandomPolicy needs a Box observation and a Discrete action space, got "
+                             f"{env.observation_space} and {env.action_space}")
         self.action_space = env.action_space
         self.observation_space = env.observation_space
         self.rng = np.random.default_rng(seed)

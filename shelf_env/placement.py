@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from shelf_env import params
-from shelf_env.camera import FREE, cell_centres
+from shelf_env.actions import cell_centres
+from shelf_env.camera import FREE
 
 
 @dataclass(frozen=True)

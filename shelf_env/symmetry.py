@@ -26,51 +26,43 @@ from collections.abc import Sequence
 import gymnasium as gym
 import numpy as np
 
+from shelf_env.actions import MIRROR_MAP, ActionCodec
 from shelf_env.camera import CLASS_RGB, REGION_RGB
-from shelf_env.env import ShelfSortEnv
-
-_MIRROR_MAP = {"pick": "pick", "push_left": "push_right", "push_right": "push_left"}
-
-
-def _shelf_env(env: gym.Env | ShelfSortEnv) -> ShelfSortEnv:
-    base = env.unwrapped
-    if not isinstance(base, ShelfSortEnv):
-        raise ValueError(f"the cabinet's symmetries need a ShelfSort-v0 env, got {type(base).__name__}")
-    return base
 
 
 class MirrorWidth:
     """Mirror a transition across the cabinet's width with probability ``p`` (see the module docstring).
 
-    :param map_names: the env's Q-map names in action order (``env.unwrapped.map_names``).
-    :param rows: heightmap rows H.
-    :param cols: heightmap columns W.
+    :param codec: the env's action codec (``env.unwrapped.codec``, `ActionCodec.of`).
     :param p: probability of mirroring each transition (1 makes it deterministic, for tests).
     """
 
-    def __init__(self, map_names: Sequence[str], rows: int, cols: int, p: float = 0.5) -> None:
-        unknown = [m for m in map_names if m not in _MIRROR_MAP]
+    def __init__(self, codec: ActionCodec, p: float = 0.5) -> None:
+        unknown = [m for m in codec.map_names if m not in MIRROR_MAP]
         if unknown:
-            raise ValueError(f"MirrorWidth knows the maps {sorted(_MIRROR_MAP)}, got {unknown}")
+            raise ValueError(f"MirrorWidth knows the maps {sorted(MIRROR_MAP)}, got {unknown}")
         if not 0.0 <= p <= 1.0:
             raise ValueError(f"p must lie in [0, 1], got {p}")
-        self.map_names = tuple(map_names)
-        self.rows, self.cols = int(rows), int(cols)
+        self.codec = codec
+        self.map_names = codec.map_names
+        self.rows, self.cols = codec.rows, codec.cols
         self.p = float(p)
-        self.map_perm = np.array([self.map_names.index(_MIRROR_MAP[m]) for m in self.map_names])
+        self.map_perm = np.array([self.map_names.index(MIRROR_MAP[m]) for m in self.map_names])
 
     @classmethod
     def for_env(cls, env: gym.Env, p: float = 0.5) -> MirrorWidth:
-        base = _shelf_env(env)
-        return cls(base.map_names, base.rows, base.cols, p)
+        """The mirror of a ShelfSort-v0 env's layout (through wrappers)."""
+        try:
+            codec = ActionCodec.of(env)
+        except ValueError as err:
+            raise ValueError(f"the cabinet's symmetries need a ShelfSort-v0 env: {err}") from err
+        return cls(codec, p)
 
     def observation(self, obs: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(obs[..., ::-1])
 
     def action(self, action: int) -> int:
-        m, rest = divmod(int(action), self.rows * self.cols)
-        row, col = divmod(rest, self.cols)
-        return (int(self.map_perm[m]) * self.rows + row) * self.cols + (self.cols - 1 - col)
+        return self.codec.mirror(int(action))
 
     def mask(self, mask: np.ndarray) -> np.ndarray:
         maps = np.asarray(mask).reshape(len(self.map_names), self.rows, self.cols)
@@ -83,7 +75,7 @@ class MirrorWidth:
         return self.observation(obs), self.action(action), self.observation(next_obs), self.mask(next_mask)
 
     def __repr__(self) -> str:
-        return f"MirrorWidth({list(self.map_names)}, {self.rows}, {self.cols}, p={self.p})"
+        return f"MirrorWidth({self.codec!r}, p={self.p})"
 
 
 def _colour_codes(colours: np.ndarray) -> np.ndarray:
@@ -99,17 +91,17 @@ class PermuteClasses:
         self._object_codes = _colour_codes(CLASS_RGB)
         self._region_codes = _colour_codes(REGION_RGB)
 
-    def observation(self, obs: np.ndarray, perm: Sequence[int]) -> np.ndarray:
+    def observation(self, obs: np.ndarray, perm: Sequence[int] | np.ndarray) -> np.ndarray:
         """``obs`` with class k shown as class ``perm[k]`` (objects and regions)."""
-        perm = np.asarray(perm)
-        if sorted(perm.tolist()) != list(range(len(CLASS_RGB))):
-            raise ValueError(f"perm must be a permutation of 0..{len(CLASS_RGB) - 1}, got {perm.tolist()}")
+        order = np.asarray(perm)
+        if sorted(order.tolist()) != list(range(len(CLASS_RGB))):
+            raise ValueError(f"perm must be a permutation of 0..{len(CLASS_RGB) - 1}, got {order.tolist()}")
         code = _colour_codes(np.moveaxis(obs[:3], 0, -1))
         out = obs.copy()
         for codes, palette in ((self._object_codes, CLASS_RGB), (self._region_codes, REGION_RGB)):
             for k, c in enumerate(codes):
                 where = code == c
-                out[:3, where] = palette[perm[k]][:, None]
+                out[:3, where] = palette[order[k]][:, None]
         return out
 
     def __call__(self, obs: np.ndarray, action: int, next_obs: np.ndarray, next_mask: np.ndarray,

@@ -177,6 +177,8 @@ class World:
         elif spec.shape == "cylinder":
             col = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=sx / 2, height=sz, physicsClientId=c)
         elif spec.shape == "mesh":
+            if spec.mesh is None:
+                raise ValueError(f"object {spec.kind!r} has shape 'mesh' but names no mesh file")
             col = pb.createCollisionShape(pb.GEOM_MESH, fileName=mesh_path(spec.mesh), physicsClientId=c)
         elif spec.shape == "mug":
             r, reach, hh = spec.extra["radius"], spec.extra["handle_reach"], spec.extra["handle_height"]

@@ -28,5 +28,4 @@ def env():
 
 def action_at(env, map_name: str, x: float, y: float) -> int:
     """Flat action index of the cell containing cabinet point (x, y) on the named map."""
-    row, col = env.camera.cell_of(x, y)
-    return env.map_names.index(map_name) * env.rows * env.cols + row * env.cols + col
+    return env.codec.action_at(map_name, x, y)

@@ -14,7 +14,7 @@ def test_empty_cabinet_is_all_seen_free_and_tinted(env):
     obs = env._obs
     rgb = obs[:3].transpose(1, 2, 0)
     # a free cell in the middle region is tinted with that region's colour
-    r, c = env.camera.cell_of(0.2, 0.0)
+    r, c = env.codec.cell_of(0.2, 0.0)
     assert (rgb[r, c] == REGION_RGB[1]).all() and obs[3, r, c] == 0
 
 
@@ -45,11 +45,11 @@ def test_cells_behind_a_tall_object_are_grey(env):
     env.set_scene([(box(0.04, 0.12, 0.16), 1, 0.08, 0.0, 0.0)], REGIONS)
     cell_uid, _ = env._semantic
     rgb = env._obs[:3].transpose(1, 2, 0)
-    behind = [env.camera.cell_of(x, 0.0) for x in (0.12, 0.15, 0.18)]
+    behind = [env.codec.cell_of(x, 0.0) for x in (0.12, 0.15, 0.18)]
     for r, c in behind:
         assert cell_uid[r, c] == OCCLUDED and (rgb[r, c] == OCCLUDED_RGB).all()
     # beside it the floor is seen
-    r, c = env.camera.cell_of(0.15, 0.2)
+    r, c = env.codec.cell_of(0.15, 0.2)
     assert cell_uid[r, c] == FREE
     # the occluded object top is not visible, so the box's footprint is only partly labelled
     assert (cell_uid == env.world.objects[0].uid).sum() > 0

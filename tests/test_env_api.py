@@ -42,7 +42,7 @@ def test_same_seed_gives_identical_observation_sequence():
         for _ in range(3):
             obj_cells = np.argwhere(env._semantic[0] >= 0)
             r, c = obj_cells[rng.integers(len(obj_cells))]
-            a = int(rng.integers(3)) * env.rows * env.cols + r * env.cols + c
+            a = env.codec.encode(env.map_names[int(rng.integers(3))], int(r), int(c))
             obs, *_ = env.step(a)
             seq.append(obs)
         again, _ = env.reset(seed=7)

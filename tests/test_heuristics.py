@@ -6,10 +6,12 @@ import pytest
 from pixel_envs import FindTheSquareEnv
 
 import shelf_env  # noqa: F401
+from shelf_env.actions import ActionCodec
 from shelf_env.camera import CLASS_RGB, FREE_RGB, REGION_RGB
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy, label_blobs
 
 H, W = 80, 120
+CODEC = ActionCodec.for_primitives(("pick", "push"), 0.005)
 
 
 @pytest.fixture(scope="module")
@@ -35,8 +37,8 @@ def observation(objects, regions=((0, 79, 0, 35), (0, 79, 42, 77), (0, 79, 84, 1
 
 
 def cell(action: int) -> tuple[int, int, int]:
-    m, rest = divmod(int(action), H * W)
-    return m, rest // W, rest % W
+    name, row, col = CODEC.decode(int(action))
+    return CODEC.map_index(name), row, col
 
 
 def test_h_d_picks_the_object_farthest_from_its_region_away_from_its_edge(envs):

@@ -98,9 +98,6 @@ def test_greedy_collection_honours_the_env_mask():
 
 
 def test_masked_requires_masks_and_any_env_with_action_masks_works():
-    class NoMasks(FindTheSquareEnv):
-        action_masks = None  # an attribute, but not the method
-
     class Plain(gym.Env):
         observation_space = gym.spaces.Box(0, 255, (4, 12, 20), dtype=np.uint8)
         action_space = gym.spaces.Discrete(HW)
@@ -114,11 +111,14 @@ def test_masked_requires_masks_and_any_env_with_action_masks_works():
     with pytest.raises(ValueError, match="masked=True but the env has no action_masks"):
         PixelDoubleDQN("FCNPolicy", Plain(), masked=True, policy_kwargs=dict(maps=[("pick", 0)], **SMALL))
     auto = PixelDoubleDQN("FCNPolicy", Plain(), policy_kwargs=dict(maps=[("pick", 0)], **SMALL))
-    assert not auto._uses_masks()  # masked=None: only if the env offers them
+    assert not auto._use_masks  # masked=None: only if the env offers them
     model = make_model()
-    assert model._uses_masks()
+    assert model._use_masks
     assert get_action_masks(model.get_env()).shape == (1, 3 * HW)
-    assert get_action_masks(FindTheSquareEnv(n_maps=3)).dtype == bool or True  # gym env path runs
+    square = FindTheSquareEnv(n_maps=3)
+    square.reset(seed=0)
+    gym_masks = get_action_masks(square)  # the Gymnasium-env path
+    assert gym_masks.shape == (3 * HW,) and gym_masks.dtype == bool and np.array_equal(gym_masks, square.action_masks())
 
 
 def test_target_argmax_uses_the_stored_next_mask():
@@ -172,6 +172,28 @@ def test_strict_margin_loss_equals_the_hand_value():
     # every violator is pushed down (not just the largest), the demonstration up
     assert th.allclose(q_all.grad[0], th.tensor([-1.0, 0.5, 0.0, 0.5]) / 4)
     assert q_all.grad[2].abs().sum() == 0
+
+
+def test_training_loss_is_huber_plus_weighted_margin_on_demonstration_rows():
+    """`pixel_loss`, which `train` calls, adds ``margin_weight`` x the margin loss of demo rows only."""
+    import torch.nn.functional as F
+
+    model = make_model(margin=0.1, margin_weight=0.7)
+    g = th.Generator().manual_seed(3)
+    obs = th.randint(0, 256, (4, *model.observation_space.shape), generator=g, dtype=th.uint8)
+    actions = th.randint(0, model.action_space.n, (4, 1), generator=g)
+    targets = th.tensor([0.5, -1.0, 0.0, -0.2])
+    demo = th.tensor([True, False, True, False])
+    with th.no_grad():
+        q_all = model.q_net.q_maps(model.policy.images(obs)).flatten(1)
+        huber = F.smooth_l1_loss(q_all.gather(1, actions).squeeze(1), targets)
+        margin = model.margin_loss(q_all[demo], actions[demo])
+        total, part = model.pixel_loss(obs, actions, targets, demo)
+        plain, none = model.pixel_loss(obs, actions, targets)
+    assert margin.item() > 0  # the check below would be blind otherwise
+    assert part.item() == pytest.approx(margin.item(), rel=1e-5)
+    assert total.item() == pytest.approx(huber.item() + 0.7 * margin.item(), rel=1e-5)
+    assert none is None and plain.item() == pytest.approx(huber.item(), rel=1e-5)
 
 
 def test_demonstrations_are_kept_flagged_and_trained_with_the_margin():

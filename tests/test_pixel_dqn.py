@@ -49,7 +49,7 @@ def test_loss_equals_hand_computed_huber():
     set_constant_output(model.q_net, 0.25)
     obs, _, actions = batch(model, 4)
     targets = th.tensor([0.0, -0.5, 3.25, -2.0])
-    loss = model.pixel_loss(obs, actions, targets)
+    loss, _ = model.pixel_loss(obs, actions, targets)
     expected = huber(0.25 - targets.numpy()).mean()  # 0.03125, 0.28125, 2.5, 1.75
     assert loss.item() == pytest.approx(expected, abs=1e-6)
 
@@ -89,7 +89,7 @@ def test_gradient_only_through_executed_pixel_and_network():
 
     handles = [fcn.register_forward_hook(keep_grad) for fcn in model.q_net.fcns.values()]
     model.policy.optimizer.zero_grad()
-    model.pixel_loss(obs, actions, th.tensor([1.0, -1.0, 2.0])).backward()
+    model.pixel_loss(obs, actions, th.tensor([1.0, -1.0, 2.0]))[0].backward()
     for h in handles:
         h.remove()
 
@@ -102,7 +102,7 @@ def test_gradient_only_through_executed_pixel_and_network():
 
     # an executed action only on the pick map gives the push network exactly zero gradient
     model.policy.optimizer.zero_grad()
-    model.pixel_loss(obs[:1], actions[:1], th.tensor([1.0])).backward()
+    model.pixel_loss(obs[:1], actions[:1], th.tensor([1.0]))[0].backward()
     for p in model.q_net.fcns["push"].parameters():
         assert p.grad is None or th.count_nonzero(p.grad) == 0
     assert any(th.count_nonzero(p.grad) > 0 for p in model.q_net.fcns["pick"].parameters())

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import REGIONS, action_at, box
 
+from shelf_env.actions import ActionCodec
 from shelf_env.symmetry import MirrorWidth, PermuteClasses, cabinet_symmetries
 from shelf_env.world import Region
 
@@ -107,4 +108,4 @@ def test_transforms_keep_layouts_and_are_involutions_where_they_should_be(shelf)
     with pytest.raises(ValueError, match="permutation of 0..2"):
         PermuteClasses().observation(obs, [0, 0, 1])
     with pytest.raises(ValueError, match="knows the maps"):
-        MirrorWidth(["pick", "rotate"], 4, 6)
+        MirrorWidth(ActionCodec(("pick", "rotate"), 4, 6, 0.01))
