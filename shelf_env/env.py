@@ -45,7 +45,7 @@ import gymnasium as gym
 import numpy as np
 import pybullet as pb
 
-from shelf_env import params
+from shelf_env import params, task
 from shelf_env.actions import PRIMITIVES, ActionCodec, clip_target, map_names
 from shelf_env.camera import CLASS_RGB, CameraConfig, HeightmapCamera, recolour, region_masks
 from shelf_env.objects import OBJECT_SETS, ObjectSpec, sample_specs
@@ -179,7 +179,7 @@ class ShelfSortEnv(gym.Env):
         pb.resetSimulation(physicsClientId=self.client)
         self.world = World(self.client, sleeping=self.sleeping)
         self.robot = Robot(self.client)
-        self.primitive_runner = Primitives(self.robot, lambda: {o.uid for o in self.world.objects})
+        self.primitive_runner = Primitives(self.robot)
         camera = getattr(self, "camera", None)
         if camera is not None:  # same bodies in the same order: same ids, but say so rather than assume
             camera.hidden_bodies = self.world.decorative
@@ -196,10 +196,10 @@ class ShelfSortEnv(gym.Env):
         self.action_count = 0
         # N of this episode: set_num_objects during an episode only affects the next reset
         self.episode_num_objects = len(self.world.objects)
-        region = self.world.region_of(self.world.positions())
-        self.num_unsorted_initial = int((region != self.world.classes()).sum())
+        judgement = task.judge(self.world)
+        self.num_unsorted_initial = int((judgement.region != judgement.classes).sum())
         self._obs = self._observe()
-        return self._obs.copy(), self._info(None, False, region, self.world.at_rest())
+        return self._obs.copy(), self._info(None, judgement)
 
     def _spawn(self, n: int) -> None:
         rng = self.np_random
@@ -270,52 +270,47 @@ class ShelfSortEnv(gym.Env):
         return self.codec.decode(action)
 
     def step(self, action):
-        prev_semantic = self._semantic
-        if self._obs is None or prev_semantic is None:
+        """One action, as the paper's pipeline (§IV-B, Eq. 2): decode the pixel -> run the primitive
+        (push; or pick -> place pose from the object the cup holds -> place) -> settle -> the task's
+        rules (`shelf_env.task`) -> camera."""
+        before = self._semantic
+        if self._obs is None or before is None:
             raise RuntimeError("call reset() before step()")
         name, row, col = self.decode_action(action)
         x, y = clip_target(*self.codec.cell_centre(row, col))
         self.world.sleep_resting()
         if name == "pick":
-            surface = float(prev_semantic[1][row, col])
-            self.primitive_runner.pick_and_place(x, y, surface, self._place_for)
+            self._pick_and_place(x, y, float(before[1][row, col]))
         else:
             self.primitive_runner.push(x, y, +1.0 if name == "push_left" else -1.0)
         self.robot.release()
         self.world.settle(step_fn=self.robot.step)
         self.action_count += 1
 
-        pos = self.world.positions()
-        inside = self.world.inside(pos)
-        resting = self.world.at_rest()[inside]
-        fell = bool((~inside).any())
-        for obj, ok in zip(list(self.world.objects), inside):
+        judgement = task.judge(self.world)
+        for obj, ok in zip(list(self.world.objects), judgement.inside):
             if not ok:  # it left the cabinet: remove it so it cannot roll around forever
                 self.world.remove_object(obj)
-        region = self.world.region_of(pos[inside])
-        valid = not fell and bool(resting.all())
-        sorted_ = valid and bool((region == self.world.classes()).all())
-        if not valid:
-            reward = params.REWARD_INVALID
-        elif sorted_:
-            reward = params.REWARD_SORTED
-        else:
-            reward = params.REWARD_STEP
-        terminated = sorted_ or not valid
-        truncated = not terminated and self.action_count >= self.max_actions
+        truncated = not judgement.terminated and self.action_count >= self.max_actions
         self._obs = self._observe()
-        info = self._info(name, fell, region, resting)
-        if valid and not sorted_ and (region >= 0).all():
-            relabel = self._class_of_uid(region)
+        info = self._info(name, judgement)
+        if judgement.relabel:
+            relabel = self._class_of_uid(judgement.region)
             info["relabelled"] = {
-                "obs": recolour(*prev_semantic, relabel, self._regions_mask),
+                "obs": recolour(*before, relabel, self._regions_mask),
                 "next_obs": recolour(*self._observed_semantic(), relabel, self._regions_mask),
                 "reward": params.REWARD_SORTED,
                 "terminated": True,
             }
-        if terminated or truncated:  # a VecEnv resets before the learner can ask for the final mask
+        if judgement.terminated or truncated:  # a VecEnv resets before the learner can ask for the final mask
             info["action_mask"] = self.action_masks()
-        return self._obs.copy(), float(reward), bool(terminated), bool(truncated), info
+        return self._obs.copy(), judgement.reward, judgement.terminated, bool(truncated), info
+
+    def _pick_and_place(self, x: float, y: float, surface_z: float) -> None:
+        """Pick at (x, y); if the cup holds an object, place it where `_place_for` puts it."""
+        grasp = self.primitive_runner.pick(x, y, surface_z, {o.uid for o in self.world.objects})
+        if grasp is not None:
+            self.primitive_runner.place(grasp, *self._place_for(grasp.uid))
 
     def action_masks(self) -> np.ndarray:
         """The actions allowed in the current observation: a bool array of ``action_space.n``,
@@ -364,16 +359,14 @@ class ShelfSortEnv(gym.Env):
         offset = (aabb_min[:2] + aabb_max[:2]) / 2 - self.robot.tcp_position()[:2]
         return clip_target(centre_x - offset[0], centre_y - offset[1])
 
-    def _info(self, primitive: str | None, fell: bool, region: np.ndarray, resting: np.ndarray) -> dict:
-        """Info dict from the region index and rest flag of every object still in the world."""
-        in_own = region == self.world.classes()
-        n_sorted = int(in_own.sum())
+    def _info(self, primitive: str | None, judgement: task.Judgement) -> dict:
+        """Info dict of the objects still in the world, from the task's judgement."""
         return {
-            "is_success": bool(not fell and len(in_own) == self.episode_num_objects and in_own.all() and resting.all()),
+            "is_success": judgement.is_success(self.episode_num_objects),
             "num_objects": self.episode_num_objects,
-            "num_sorted": n_sorted,
+            "num_sorted": int((judgement.region == judgement.classes).sum()),
             "num_unsorted_initial": self.num_unsorted_initial,
-            "fell": fell,
+            "fell": judgement.fell,
             "primitive": primitive,
             "action_count": self.action_count,
         }

@@ -222,12 +222,22 @@ def _z_max(motion: MotionConfig) -> float:
     return params.CABINET_HEIGHT - TOOL_TOP_ABOVE_TCP - motion.ceiling_clearance
 
 
-class Primitives:
-    """Push and pick-and-place (§IV-B) executed by a :class:`Robot` on object bodies."""
+@dataclass(frozen=True)
+class Grasp:
+    """What a successful pick leaves in the cup: the object and where the carry stopped (in front
+    of the opening, at carry height)."""
 
-    def __init__(self, robot: Robot, object_uids: Callable[[], set[int]]):
+    uid: int
+    out_x: float
+    z_carry: float
+
+
+class Primitives:
+    """Push, pick and place (§IV-B) executed by a :class:`Robot`; each takes poses and returns
+    what happened, and the env decides the next pose (e.g. the place pose from the object held)."""
+
+    def __init__(self, robot: Robot):
         self.robot = robot
-        self.object_uids = object_uids
 
     def push(self, x: float, y: float, direction: float,
              length: float = params.PUSH_LENGTH, height: float = params.PUSH_HEIGHT) -> None:
@@ -245,11 +255,10 @@ class Primitives:
         r.move_linear(start, outside, m.approach_speed)
         r.go_home()
 
-    def pick_and_place(self, x: float, y: float, surface_z: float,
-                       place: Callable[[int], tuple[float, float] | None]) -> int | None:
-        """Pick at (x, y) from the observed surface height ``surface_z``; place where
-        ``place(uid)`` says. Returns the uid of the object picked, or None if the cup found
-        nothing to grip."""
+    def pick(self, x: float, y: float, surface_z: float, objects: set[int]) -> Grasp | None:
+        """Descend at (x, y) from the observed surface height ``surface_z`` until the cup touches
+        one of ``objects``, grip it, lift it as high as the ceiling allows and carry it out of the
+        opening. Returns the `Grasp`, or None (arm back home) if the cup found nothing to grip."""
         r, m = self.robot, self.robot.motion
         z_max = _z_max(m)
         z_app = min(surface_z + m.pick_clearance, z_max)
@@ -258,7 +267,6 @@ class Primitives:
         above = np.array([x, y, z_app])
         r.teleport(outside)
         r.move_linear(outside, above, m.approach_speed)
-        objects = self.object_uids()
         touched: list[int] = []
 
         def touching() -> bool:
@@ -287,29 +295,30 @@ class Primitives:
         ahead = pb.getAABB(obj, physicsClientId=r.client)[1][0] - self._commanded_tcp()[0]
         out_x = float(np.clip(-ahead - 0.01, OUTSIDE_X_MIN, m.outside_x))
         r.move_linear(lifted, np.array([out_x, y, z_carry]), m.approach_speed)
-        target = place(obj)
-        if target is None:  # nowhere to put it: put it back where it came from
-            target = (x, y)
-        px, py = target
+        return Grasp(int(obj), out_x, float(z_carry))
+
+    def place(self, grasp: Grasp, x: float, y: float) -> None:
+        """Carry the held object of ``grasp`` in front of (x, y), in at carry height, lower it
+        until it lands (or hangs just above the floor), release it and go home."""
+        r, m = self.robot, self.robot.motion
+        obj, out_x, z_carry = grasp.uid, grasp.out_x, grasp.z_carry
         hang = self._commanded_tcp()[2] - pb.getAABB(obj, physicsClientId=r.client)[0][2]
-        r.teleport(np.array([out_x, py, z_carry]))
-        r.move_linear(np.array([out_x, py, z_carry]), np.array([px, py, z_carry]), m.approach_speed)
+        r.teleport(np.array([out_x, y, z_carry]))
+        r.move_linear(np.array([out_x, y, z_carry]), np.array([x, y, z_carry]), m.approach_speed)
         z_release = min(max(hang + m.release_gap, 0.0), z_carry)
 
         def landed() -> bool:  # the held object touches anything but the tool
             pts = pb.getContactPoints(bodyA=obj, physicsClientId=r.client)
             return any(p[2] != r.uid for p in pts)
 
-        r.move_linear(np.array([px, py, z_carry]), np.array([px, py, z_release]), m.lift_speed,
-                      stop=landed)
+        r.move_linear(np.array([x, y, z_carry]), np.array([x, y, z_release]), m.lift_speed, stop=landed)
         r.release()
         r.hold_still(12)
         here = self._commanded_tcp()
-        r.move_linear(here, np.array([px, py, min(here[2] + m.lift, z_max)]), m.vertical_speed)
+        r.move_linear(here, np.array([x, y, min(here[2] + m.lift, _z_max(m))]), m.vertical_speed)
         here = self._commanded_tcp()
-        r.move_linear(here, np.array([m.outside_x, py, here[2]]), m.approach_speed)
+        r.move_linear(here, np.array([m.outside_x, y, here[2]]), m.approach_speed)
         r.go_home()
-        return obj
 
     def _commanded_tcp(self) -> np.ndarray:
         """TCP position of the last commanded joint angles (the path the planner is on)."""
