@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import pathlib
 
 import matplotlib
@@ -28,6 +29,15 @@ def read_episodes(path: pathlib.Path) -> dict[str, np.ndarray]:
     if not rows:
         raise ValueError(f"{path} has no episodes yet")
     return {key: np.array([float(r[key]) for r in rows]) for key in rows[0]}
+
+
+def layout_name(run: pathlib.Path) -> str:
+    """"P+S" or "S" from the run's stored configuration (P+S when it has none)."""
+    progress = run / "progress.json"
+    if progress.exists():
+        primitives = json.loads(progress.read_text()).get("config", {}).get("primitives", ["pick", "push"])
+        return "P+S" if "push" in primitives else "S"
+    return "P+S"
 
 
 def rolling_mean(x: np.ndarray, window: int) -> np.ndarray:
@@ -73,7 +83,7 @@ def main() -> None:
     ax3.set_xlabel("wall-clock minutes")
     ax3.set_ylabel("objects N")
     ax3.set_ylim(0, max(ep["num_objects"]) + 1)
-    fig.suptitle("PixelDoubleDQN (P+S) curriculum on ShelfSort-v0, CPU")
+    fig.suptitle(f"PixelDoubleDQN ({layout_name(args.run)}) curriculum on ShelfSort-v0")
     fig.tight_layout()
     png.parent.mkdir(parents=True, exist_ok=True)
     write_atomically(png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))

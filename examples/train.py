@@ -12,6 +12,12 @@ history), ``episodes.csv`` (one row per finished episode) and ``tb/`` (TensorBoa
 same command again resumes from the last checkpoint until the total budget is spent; rows of
 ``episodes.csv`` written after that checkpoint are dropped, as their steps are redone.
 ``python examples/plot_training.py runs/curriculum`` turns ``episodes.csv`` into a PNG.
+
+``--mirror DIR`` keeps a copy of everything but the replay buffer (``model.zip``,
+``progress.json``, ``episodes.csv``, ``tb/``) in ``DIR`` after every checkpoint, for committing.
+A run whose ``--out`` has no checkpoint (a fresh machine) starts from that copy: it resumes from
+the weights, the curriculum stage and ε with an empty buffer, which it refills (demonstrations
+again, then ``learning_starts`` steps before learning resumes).
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import PixelDoubleDQN
-from sb3_pixeldqn.files import write_json_atomically, write_text_atomically
+from sb3_pixeldqn.files import write_atomically, write_json_atomically, write_text_atomically
 from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_curriculum, make_env, make_model
 
 EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
@@ -55,6 +61,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--hours", type=float, default=2.0, help="total wall-clock budget over all resumes")
     p.add_argument("--max-steps", type=int, default=10**7, help="total env-step budget over all resumes")
     p.add_argument("--checkpoint-minutes", type=float, default=10.0)
+    p.add_argument("--mirror", type=pathlib.Path, default=None,
+                   help="copy the checkpoint (all but the replay buffer) here; resume from it when --out has none")
     p.add_argument("--primitives", choices=["pick-push", "pick"], default=None, help="P+S or the S baseline")
     p.add_argument("--start-objects", type=int, default=None)
     p.add_argument("--max-objects", type=int, default=None)
@@ -93,9 +101,11 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 class BudgetAndCheckpoint(BaseCallback):
     """Logs finished episodes, checkpoints every few minutes and stops when the budget is spent."""
 
-    def __init__(self, out: pathlib.Path, progress: dict, hours: float, max_steps: int, every_minutes: float) -> None:
+    def __init__(self, out: pathlib.Path, progress: dict, hours: float, max_steps: int, every_minutes: float,
+                 mirror: pathlib.Path | None = None) -> None:
         super().__init__()
         self.out = out
+        self.mirror = mirror
         self.progress = progress
         self.budget_seconds = hours * 3600.0
         self.max_steps = max_steps
@@ -148,9 +158,28 @@ class BudgetAndCheckpoint(BaseCallback):
             curriculum=self.model.curriculum_state,
         )
         write_json_atomically(self.out / "progress.json", self.progress)
+        if self.mirror is not None:
+            copy_checkpoint(self.out, self.mirror)
         self.last_checkpoint = time.monotonic()
         print(f"[{self.progress['wall_seconds'] / 60:6.1f} min] checkpoint at step {self.model.num_timesteps}, "
               f"N = {self.model.curriculum_state['value']}", flush=True)
+
+
+MIRRORED = ("model.zip", "episodes.csv", "progress.json")  # progress last: it vouches for the others
+
+
+def copy_checkpoint(src: pathlib.Path, dst: pathlib.Path) -> None:
+    """Copy a run's checkpoint but its replay buffer (``MIRRORED`` files and ``tb/``), each file atomically."""
+    for name in MIRRORED:
+        if (src / name).exists():
+            data = (src / name).read_bytes()
+            write_atomically(dst / name, lambda tmp, data=data: tmp.write_bytes(data))
+    if (src / "tb").is_dir():
+        for path in sorted((src / "tb").rglob("*")):
+            target = dst / path.relative_to(src)
+            if path.is_file() and (not target.exists() or target.stat().st_size != path.stat().st_size):
+                data = path.read_bytes()
+                write_atomically(target, lambda tmp, data=data: tmp.write_bytes(data))
 
 
 def truncate_csv(path: pathlib.Path, rows: int) -> None:
@@ -167,6 +196,9 @@ def main(argv: list[str] | None = None) -> None:
     th.set_num_threads(args.threads)
     args.out.mkdir(parents=True, exist_ok=True)
     progress_path = args.out / "progress.json"
+    if args.mirror is not None and not (args.out / "model.zip").exists() and (args.mirror / "model.zip").exists():
+        copy_checkpoint(args.mirror, args.out)  # a fresh machine: start from the committed checkpoint
+        print(f"starting from the checkpoint in {args.mirror}", flush=True)
     resume = (args.out / "model.zip").exists() and progress_path.exists()
     if resume:  # the run's own configuration wins over the flags
         progress = json.loads(progress_path.read_text())
@@ -181,9 +213,11 @@ def main(argv: list[str] | None = None) -> None:
         print(f"resuming at step {model.num_timesteps}, {progress['wall_seconds'] / 60:.1f} min used", flush=True)
         if (args.out / "replay.pkl").exists():
             model.load_replay_buffer(args.out / "replay.pkl")
-        else:
+        else:  # refill before learning again, as a fresh run does
+            model.learning_starts = model.num_timesteps + config.learning_starts
             print("no replay.pkl: resuming from the weights, the curriculum stage and epsilon with an empty "
-                  "buffer (demonstrations are collected again)", flush=True)
+                  f"buffer (demonstrations are collected again; learning resumes after step {model.learning_starts})",
+                  flush=True)
     else:
         model = make_model(config, env, seed=args.seed, tensorboard_log=str(args.out / "tb"))
     demos = demo_policy(config, env)
@@ -201,7 +235,7 @@ def main(argv: list[str] | None = None) -> None:
         progress["demo_seconds"] = progress.get("demo_seconds", 0.0) + seconds
         print(f"demonstrations took {seconds:.0f} s", flush=True)
     truncate_csv(args.out / "episodes.csv", progress["episodes"])
-    budget = BudgetAndCheckpoint(args.out, progress, args.hours, args.max_steps, args.checkpoint_minutes)
+    budget = BudgetAndCheckpoint(args.out, progress, args.hours, args.max_steps, args.checkpoint_minutes, args.mirror)
     if budget.wall_seconds() >= budget.budget_seconds or model.num_timesteps >= args.max_steps:
         print("budget already spent; nothing to do")
         return

@@ -25,6 +25,7 @@ With an ``eval_env`` the greedy checks run under either gate (``greedy_history``
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
@@ -60,7 +61,8 @@ class CurriculumCallback(BaseCallback):
     :param eval_episodes: episodes per greedy check.
     :param eval_seed: seed of the greedy checks' scene stream.
     :param eval_max_actions: a greedy-check episode still running after this many actions counts as
-        failed and is cut (None: the env's own limit). A looping policy then costs little to check.
+        failed and is cut; an int, or a function of the stage's value (e.g. more actions for more
+        objects), or None (the env's own limit). A looping policy then costs little to check.
     :param verbose: 1 prints each stage change and greedy check.
     """
 
@@ -77,7 +79,7 @@ class CurriculumCallback(BaseCallback):
         eval_every: int = EVAL_EVERY,
         eval_episodes: int = EVAL_EPISODES,
         eval_seed: int = 0,
-        eval_max_actions: int | None = None,
+        eval_max_actions: int | Callable[[int], int] | None = None,
         verbose: int = 0,
     ) -> None:
         super().__init__(verbose)
@@ -195,6 +197,7 @@ class CurriculumCallback(BaseCallback):
         env.get_wrapper_attr(self.setter)(self.value)
         # as the model acts: with the env's masks unless it was trained without them (acts_masked)
         has_masks = env.has_wrapper_attr("action_masks") and getattr(self.model, "acts_masked", True)
+        limit = self.eval_max_actions(self.value) if callable(self.eval_max_actions) else self.eval_max_actions
         successes = 0
         for _ in range(self.eval_episodes):
             obs, info = env.reset(seed=int(self.eval_rng.integers(2**31)))
@@ -205,7 +208,7 @@ class CurriculumCallback(BaseCallback):
                 obs, _, terminated, truncated, info = env.step(int(np.asarray(action).reshape(-1)[0]))
                 actions += 1
                 done = terminated or truncated
-                if not done and self.eval_max_actions is not None and actions >= self.eval_max_actions:
+                if not done and limit is not None and actions >= limit:
                     info = {"is_success": False}
                     done = True
             successes += bool(info.get("is_success"))

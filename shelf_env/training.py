@@ -1,6 +1,6 @@
 """Training configurations of `PixelDoubleDQN` on `ShelfSort-v0`, in one place.
 
-A `TrainConfig` holds every lever of the learning recipe (docs/learning.md). Three presets:
+A `TrainConfig` holds every lever of the learning recipe (docs/learning.md). Presets:
 
 - ``"recipe"``: what docs/learning.md measured to learn on two CPU cores — action masks everywhere,
   H-a demonstrations with the large-margin loss, mirror and class-permutation augmentation, a
@@ -9,6 +9,8 @@ A `TrainConfig` holds every lever of the learning recipe (docs/learning.md). Thr
 - ``"paper"``: the paper's values (§IV-D): lr 1e-4, Polyak β = 1e-3 every step, all-pixel
   argmax, uniform exploration, 5 mm cells, the ε-greedy 50-episode curriculum rule, no
   demonstrations or augmentation, every relabelled transition kept;
+- ``"p_s"`` and ``"s"``: the recipe through the whole curriculum (N = 1 -> 8) for the shipped P+S
+  and pick-only S models; greedy checks get more actions for more objects;
 - ``"issue3"``: the loop of the first CPU runs (paper values with lr 1e-3 and masked exploration
   only), the baseline of the ablation.
 
@@ -19,6 +21,8 @@ A `TrainConfig` holds every lever of the learning recipe (docs/learning.md). Thr
 from __future__ import annotations
 
 import dataclasses
+import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -76,6 +80,9 @@ class TrainConfig:
     eval_every: int = 500
     eval_episodes: int = 20
     eval_max_actions: int | None = 20
+    # greedy checks at N objects allow max(eval_max_actions, ceil(eval_actions_per_object * N)) actions
+    # (0: eval_max_actions at every N); the curriculum presets need more actions for more objects
+    eval_actions_per_object: float = 0.0
     # lever 8: hindsight relabelling ("changed", "all", "off")
     relabel: str = "changed"
     extra: dict[str, Any] = field(default_factory=dict)
@@ -103,8 +110,15 @@ class TrainConfig:
         return cls(**data)
 
 
+_RECIPE = TrainConfig()
+#: Issue 10's models: the recipe through the curriculum N = 1 -> 8, with greedy checks allowed
+#: 3 actions per object from N = 7 on (20 below), P+S and the pick-only S.
+_CURRICULUM = _RECIPE.replace(eval_actions_per_object=3.0)
+
 PRESETS: dict[str, TrainConfig] = {
-    "recipe": TrainConfig(),
+    "recipe": _RECIPE,
+    "p_s": _CURRICULUM,
+    "s": _CURRICULUM.replace(primitives=("pick",)),
     "paper": TrainConfig(
         pixel_size=params.PIXEL_SIZE, masked=False, masked_exploration=False, demo_policy=None, augment=(),
         demo_fraction=0.0, margin_weight=0.0,
@@ -179,6 +193,14 @@ def demo_policy(config: TrainConfig, env: gym.Env) -> Any:
     return DEMO_POLICIES[config.demo_policy](env)
 
 
+def eval_action_limit(config: TrainConfig) -> int | Callable[[int], int] | None:
+    """The greedy checks' action limit of ``config``: fixed, or growing with the number of objects."""
+    fixed, per_object = config.eval_max_actions, config.eval_actions_per_object
+    if per_object <= 0:
+        return fixed
+    return lambda n: max(fixed or 0, math.ceil(per_object * n))
+
+
 def make_curriculum(config: TrainConfig, seed: int = 0, verbose: int = 1) -> Any:
     """The curriculum callback of ``config``, with its own greedy-check env (scene stream ``seed + 10**6``)."""
     from sb3_pixeldqn import CurriculumCallback
@@ -186,6 +208,6 @@ def make_curriculum(config: TrainConfig, seed: int = 0, verbose: int = 1) -> Any
     return CurriculumCallback(
         start_value=config.start_objects, max_value=config.max_objects, min_stage_timesteps=config.min_stage_timesteps,
         gate=config.gate, eval_env=make_env(config), eval_every=config.eval_every,
-        eval_episodes=config.eval_episodes, eval_seed=seed + 10**6, eval_max_actions=config.eval_max_actions,
+        eval_episodes=config.eval_episodes, eval_seed=seed + 10**6, eval_max_actions=eval_action_limit(config),
         verbose=verbose,
     )

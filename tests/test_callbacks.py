@@ -102,3 +102,29 @@ def test_bad_curriculum_arguments():
         CurriculumCallback(start_value=5, max_value=3)
     with pytest.raises(ValueError):
         CurriculumCallback(threshold=1.5)
+
+
+def test_greedy_check_action_limit_may_grow_with_the_stage():
+    """eval_max_actions as a function of N: an episode that needs 2 N actions passes a 2 N limit and
+    fails a fixed limit below it (it is cut and counted as failed)."""
+    from pixel_envs import FindTheSquareEnv
+
+    class SlowEnv(FindTheSquareEnv):
+        """Succeeds after exactly 2 N steps, whatever the actions."""
+
+        def reset(self, *, seed=None, options=None):
+            self.t = 0
+            return super().reset(seed=seed, options=options)
+
+        def step(self, action):
+            self.t += 1
+            done = self.t >= 2 * self.num_objects
+            return self._obs(), 0.0, done, False, {"is_success": done, "num_objects": self.num_objects}
+
+    model = PixelDoubleDQN("FCNPolicy", SlowEnv(), **KW)
+    for limit, expected in ((lambda n: 2 * n, 1.0), (5, 0.0), (None, 1.0)):
+        cb = CurriculumCallback(start_value=3, max_value=3, gate="greedy", eval_env=SlowEnv(), eval_episodes=2,
+                                eval_max_actions=limit)
+        cb.init_callback(model)
+        cb.value = 3
+        assert cb.greedy_success() == expected

@@ -37,3 +37,30 @@ def test_checkpoints_count_wall_time_once_and_resume(tmp_path):
     model = PixelDoubleDQN.load(tmp_path / "model.zip")
     model.load_replay_buffer(tmp_path / "replay.pkl")
     assert model.replay_buffer.demonstrations.n_stored >= 3 and model.demo_timesteps == 3
+
+
+def test_mirror_keeps_a_committable_copy_and_a_fresh_machine_resumes_from_it(tmp_path):
+    """--mirror: everything but replay.pkl is copied; a run dir without a checkpoint starts from the
+    copy (weights, stage, epsilon, counters), refills its buffer and learns again only after
+    learning_starts new steps."""
+    run, mirror = tmp_path / "run", tmp_path / "committed"
+    common = ["--learning-starts", "2", "--buffer-size", "200", "--widths", "4", "8", "8", "--checkpoint-minutes",
+              "0", "--threads", "1", "--set", "demo_steps=3", "--mirror", str(mirror)]
+    train.main(["--out", str(run), *common, "--max-steps", "4"])
+    assert sorted(p.name for p in mirror.iterdir()) == ["episodes.csv", "model.zip", "progress.json", "tb"]
+    assert (run / "replay.pkl").exists() and not (mirror / "replay.pkl").exists()
+    first = json.loads((mirror / "progress.json").read_text())
+    assert first["timesteps"] == 4
+
+    fresh = tmp_path / "fresh_machine"
+    train.main(["--out", str(fresh), *common, "--max-steps", "7"])
+    progress = json.loads((fresh / "progress.json").read_text())
+    assert progress["timesteps"] == 7 and progress["wall_seconds"] > first["wall_seconds"]
+    assert json.loads((mirror / "progress.json").read_text())["timesteps"] == 7  # mirrored again
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    model = PixelDoubleDQN.load(fresh / "model.zip")
+    assert model.learning_starts == 4 + 2  # refilled before learning again
+    model.load_replay_buffer(fresh / "replay.pkl")
+    assert model.replay_buffer.demonstrations.n_stored >= 3  # demonstrations collected again
+    assert model.replay_buffer.size() == 3  # only the new steps: the old buffer was not committed

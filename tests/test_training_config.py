@@ -105,3 +105,11 @@ def test_committed_recipe_checkpoint_sorts_held_out_scenes():
     results = [ev.run_episode(env, model, ev.scene_seed(ev.HELDOUT_SEED, 3, run)) for run in range(3)]
     assert all(r["success"] and r["actions"] <= 9 and r["noops"] == 0 for r in results), results
     env.close()
+
+
+def test_eval_action_limit_grows_with_objects_only_when_asked():
+    from shelf_env.training import eval_action_limit
+
+    assert eval_action_limit(PRESETS["recipe"]) == 20
+    limit = eval_action_limit(PRESETS["recipe"].replace(eval_actions_per_object=3.0))
+    assert [limit(n) for n in (1, 6, 7, 8)] == [20, 20, 21, 24]
