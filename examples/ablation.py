@@ -21,18 +21,15 @@ from __future__ import annotations
 import argparse
 import json
 import pathlib
-import sys
 import time
 from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-import train  # noqa: E402
-
-from sb3_pixeldqn.files import write_atomically, write_json_atomically, write_text_atomically  # noqa: E402
-from shelf_env import evaluation as ev  # noqa: E402
-from shelf_env.training import PRESETS  # noqa: E402
+from sb3_pixeldqn.files import write_atomically, write_json_atomically, write_text_atomically
+from shelf_env import evaluation as ev
+from shelf_env.cli import train
+from shelf_env.training import PRESETS
 
 HELDOUT_SEED = ev.HELDOUT_SEED
 #: Row name -> (overrides of the recipe, description of what is switched off).
@@ -72,7 +69,8 @@ def run_row(row: str, seed: int, minutes: float, start_objects: int, scenes: int
             "--checkpoint-minutes", "5"]
     for key, value in overrides.items():
         args += ["--set", f"{key}={json.dumps(list(value) if isinstance(value, tuple) else value)}"]
-    train.main(args)
+    if train.main(args) != 0:
+        raise SystemExit(f"ablation row {row}: shelf-train refused its arguments {args}")
     progress = json.loads((run / "progress.json").read_text())
     from sb3_pixeldqn import PixelDoubleDQN
 

@@ -41,6 +41,12 @@ def write_text_atomically(path: str | os.PathLike, text: str) -> pathlib.Path:
     return write_atomically(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
+def copy_atomically(src: str | os.PathLike, dst: str | os.PathLike) -> pathlib.Path:
+    """Copy the file ``src`` to ``dst`` (contents only), atomically."""
+    data = pathlib.Path(src).read_bytes()
+    return write_atomically(dst, lambda tmp: tmp.write_bytes(data))
+
+
 def write_json_atomically(path: str | os.PathLike, data: Any, indent: int | None = 1) -> pathlib.Path:
     """`write_atomically` for JSON (NaN allowed, as Python's json writes it)."""
     return write_text_atomically(path, json.dumps(data, indent=indent, allow_nan=True))

@@ -194,6 +194,16 @@ class FCNPolicy(BasePolicy):
         with th.no_grad():
             return th.cat([net.q_maps(chunk) for chunk in images.split(self.no_grad_chunk)])
 
+    def q_map_values(self, observation: np.ndarray) -> np.ndarray:
+        """The online Q-maps of one observation ``(C, H, W)`` -> ``(n_maps, H, W)``, or of a batch
+        ``(B, C, H, W)`` -> ``(B, n_maps, H, W)``, as float32 numpy: for looking at what the network
+        values (demos, TensorBoard images); acting goes through `predict`."""
+        self.set_training_mode(False)
+        obs_tensor, vectorized = self.obs_to_tensor(observation)
+        assert isinstance(obs_tensor, th.Tensor)  # check_spaces allows Box observations only
+        q = self.all_q_maps(self.q_net, self.images(obs_tensor)).float().cpu().numpy()
+        return q if vectorized else q[0]
+
     def q_values_at(self, net: PixelQNetwork, images: th.Tensor, actions: th.Tensor) -> th.Tensor:
         """Q of each sample's action (flat index) under ``net``; gradients flow only if ``net`` has them."""
         map_index, pixel_index = self.split_actions(actions)

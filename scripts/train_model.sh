@@ -4,7 +4,7 @@
 #   bash scripts/train_model.sh s       # S (pick only, the paper's baseline)
 # The "p_s" / "s" preset of shelf_env/training.py (the learning recipe through the curriculum
 # N = 1 -> 8), seed 0, two torch threads, a total budget of --hours of wall clock (default 12, over
-# as many runs of this command as it takes; extra arguments go to examples/train.py).
+# as many runs of this command as it takes; extra arguments go to shelf-train).
 # The run lives in runs/<model> (with its replay buffer); after every checkpoint (10 min) all but
 # the buffer is copied to results/training/<model>, which is committed. On a fresh machine the
 # same command resumes from that copy (weights, stage, epsilon) and refills the buffer.
@@ -17,6 +17,6 @@ case "$model" in
 esac
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
-python examples/train.py --out "runs/$model" --mirror "results/training/$model" --preset "$model" --seed 0 \
+shelf-train --out "runs/$model" --mirror "results/training/$model" --preset "$model" --seed 0 \
     --hours 12 --threads 2 --checkpoint-minutes 10 "$@"
 python examples/plot_training.py "results/training/$model" --png "results/training/$model/curve.png"

@@ -29,11 +29,15 @@ from typing import Any
 import gymnasium as gym
 from stable_baselines3.common.vec_env import VecEnv
 
+from sb3_pixeldqn.buffers import NOOP_MODES, RELABEL_MODES
+from sb3_pixeldqn.callbacks import GATES
 from shelf_env import params
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
+from shelf_env.objects import OBJECT_SETS
 from shelf_env.symmetry import MirrorWidth, PermuteClasses
 
 DEMO_POLICIES = {"h-a": AccessibilityHeuristic, "h-d": DistanceHeuristic}
+AUGMENTATIONS = ("mirror", "permute")
 
 
 @dataclass
@@ -91,6 +95,28 @@ class TrainConfig:
         # sequences given as lists (JSON, --set) are stored as the tuples the fields declare
         for key in ("primitives", "augment", "widths", "demo_objects"):
             setattr(self, key, tuple(getattr(self, key)))
+        self.check()
+
+    def check(self) -> None:
+        """A clear `ValueError` for a value no run could use (before any env or model is built)."""
+        choices = {"object_set": OBJECT_SETS, "noop": NOOP_MODES, "relabel": RELABEL_MODES, "gate": GATES,
+                   "demo_policy": (*DEMO_POLICIES, None)}
+        for key, allowed in choices.items():
+            if getattr(self, key) not in allowed:
+                raise ValueError(f"TrainConfig.{key} must be one of {list(allowed)}, got {getattr(self, key)!r}")
+        names = self.primitives
+        if not names or len(set(names)) != len(names) or not set(names) <= {"pick", "push"}:
+            raise ValueError(f"TrainConfig.primitives must be distinct names from ('pick', 'push'), got {names}")
+        unknown = [a for a in self.augment if a not in AUGMENTATIONS]
+        if unknown:
+            raise ValueError(f"unknown augmentations {unknown}; known: {list(AUGMENTATIONS)}")
+        if not 1 <= self.start_objects <= self.max_objects <= params.MAX_OBJECTS:
+            raise ValueError(f"need 1 <= start_objects <= max_objects <= {params.MAX_OBJECTS}, got "
+                             f"{self.start_objects} and {self.max_objects}")
+        if not 0.002 <= self.pixel_size <= 0.02:
+            raise ValueError(f"TrainConfig.pixel_size must be in [0.002, 0.02] m, got {self.pixel_size}")
+        if self.batch_size < 1 or self.buffer_size < 1 or self.gradient_steps < 1 or self.learning_rate <= 0:
+            raise ValueError("TrainConfig needs batch_size, buffer_size, gradient_steps >= 1 and learning_rate > 0")
 
     def replace(self, **changes: Any) -> TrainConfig:
         unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
@@ -142,11 +168,8 @@ def make_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any)
 
 
 def augmentations(config: TrainConfig, env: gym.Env) -> list[Any]:
-    known = {"mirror": lambda: MirrorWidth.for_env(env), "permute": PermuteClasses}
-    unknown = [a for a in config.augment if a not in known]
-    if unknown:
-        raise ValueError(f"unknown augmentations {unknown}; known: {sorted(known)}")
-    return [known[a]() for a in config.augment]
+    """The transforms named by ``config.augment``, for ``env``'s layout."""
+    return [MirrorWidth.for_env(env) if name == "mirror" else PermuteClasses() for name in config.augment]
 
 
 def make_model(config: TrainConfig, env: gym.Env | VecEnv, seed: int = 0, tensorboard_log: str | None = None,

@@ -1,13 +1,10 @@
-"""examples/train.py on the real env for a handful of steps: checkpoints, honest wall time, resume."""
+"""shelf-train (examples/train.py) on the real env for a handful of steps: checkpoints, honest wall time, resume."""
 
 import csv
 import json
-import pathlib
-import sys
 import time
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "examples"))
-import train  # noqa: E402
+from shelf_env.cli import train
 
 
 def test_checkpoints_count_wall_time_once_and_resume(tmp_path):

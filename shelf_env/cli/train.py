@@ -1,0 +1,274 @@
+"""Train PixelDoubleDQN on ShelfSort-v0 with the curriculum, on a wall-clock budget, resumably.
+
+    shelf-train --out runs/curriculum --hours 2 [--preset recipe|p_s|s|paper|issue3] [--set KEY=VALUE ...]
+    python examples/train.py ...                  # the same
+
+The configuration is a `shelf_env.training.TrainConfig` preset with overrides; it is stored in
+``progress.json`` and a resumed run keeps it. With demonstrations, they are collected first (their
+wall time counts in the budget) and kept in the replay buffer.
+
+Everything lives in ``--out``: ``model.zip`` and ``replay.pkl`` (checkpoint, written atomically
+every ``--checkpoint-minutes``), ``progress.json`` (wall time and steps used so far, curriculum
+history), ``episodes.csv`` (one row per finished episode) and ``tb/`` (TensorBoard). Running the
+same command again resumes from the last checkpoint until the total budget is spent; rows of
+``episodes.csv`` written after that checkpoint are dropped, as their steps are redone.
+``python examples/plot_training.py runs/curriculum`` turns ``episodes.csv`` into a PNG.
+
+``--mirror DIR`` keeps a copy of everything but the replay buffer (``model.zip``,
+``progress.json``, ``episodes.csv``, ``tb/``) in ``DIR`` after every checkpoint, for committing.
+A run whose ``--out`` has no checkpoint (a fresh machine) starts from that copy: it resumes from
+the weights, the curriculum stage and ε with an empty buffer, which it refills (demonstrations
+again, then ``learning_starts`` steps before learning resumes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import pathlib
+import sys
+import time
+from typing import Any, TextIO
+
+import torch as th
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+import shelf_env  # noqa: F401  (registers ShelfSort-v0)
+from sb3_pixeldqn import HindsightRelabelReplayBuffer, PixelDoubleDQN
+from sb3_pixeldqn.files import copy_atomically, write_json_atomically, write_text_atomically
+from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_curriculum, make_env, make_model
+
+EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
+
+
+def parse_set(text: str) -> tuple[str, Any]:
+    """"key=value" with value parsed as JSON when it can be (numbers, true/false, null, lists)."""
+    if "=" not in text:
+        raise argparse.ArgumentTypeError(f"--set needs key=value, got {text!r}")
+    key, value = text.split("=", 1)
+    try:
+        return key, json.loads(value)
+    except json.JSONDecodeError:
+        return key, value
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="shelf-train", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/curriculum"))
+    p.add_argument("--preset", choices=sorted(PRESETS), default="recipe",
+                   help="starting configuration (shelf_env/training.py); flags below override it")
+    p.add_argument("--set", dest="overrides", type=parse_set, action="append", default=[], metavar="KEY=VALUE",
+                   help="override any TrainConfig field, e.g. --set masked=false --set augment=[]")
+    p.add_argument("--hours", type=float, default=2.0, help="total wall-clock budget over all resumes")
+    p.add_argument("--max-steps", type=int, default=10**7, help="total env-step budget over all resumes")
+    p.add_argument("--checkpoint-minutes", type=float, default=10.0)
+    p.add_argument("--mirror", type=pathlib.Path, default=None,
+                   help="copy the checkpoint (all but the replay buffer) here; resume from it when --out has none")
+    p.add_argument("--primitives", choices=["pick-push", "pick"], default=None, help="P+S or the S baseline")
+    p.add_argument("--start-objects", type=int, default=None)
+    p.add_argument("--max-objects", type=int, default=None)
+    p.add_argument("--widths", type=int, nargs=3, default=None)
+    p.add_argument("--buffer-size", type=int, default=None)
+    p.add_argument("--learning-starts", type=int, default=None)
+    p.add_argument("--learning-rate", type=float, default=None)
+    p.add_argument("--exploration-timesteps", type=int, default=None)
+    p.add_argument("--min-stage-timesteps", type=int, default=None,
+                   help="curriculum stages last at least this many steps (0: no minimum)")
+    p.add_argument("--uniform-exploration", action="store_true", help="draw exploratory actions uniformly")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    return p.parse_args(argv)
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    """The preset with the flags' and ``--set``'s overrides applied."""
+    changes: dict[str, Any] = {}
+    if args.primitives is not None:
+        changes["primitives"] = ("pick", "push") if args.primitives == "pick-push" else ("pick",)
+    for flag, key in (("start_objects", "start_objects"), ("max_objects", "max_objects"),
+                      ("buffer_size", "buffer_size"), ("learning_starts", "learning_starts"),
+                      ("learning_rate", "learning_rate"), ("exploration_timesteps", "exploration_timesteps"),
+                      ("min_stage_timesteps", "min_stage_timesteps")):
+        if getattr(args, flag) is not None:
+            changes[key] = getattr(args, flag)
+    if args.widths is not None:
+        changes["widths"] = tuple(args.widths)
+    if args.uniform_exploration:
+        changes["masked_exploration"] = False
+    changes.update(dict(args.overrides))
+    return PRESETS[args.preset].replace(**changes)
+
+
+class BudgetAndCheckpoint(BaseCallback):
+    """Logs finished episodes, checkpoints every few minutes and stops when the budget is spent."""
+
+    def __init__(self, out: pathlib.Path, progress: dict, hours: float, max_steps: int, every_minutes: float,
+                 mirror: pathlib.Path | None = None) -> None:
+        super().__init__()
+        self.out = out
+        self.mirror = mirror
+        self.progress = progress
+        self.budget_seconds = hours * 3600.0
+        self.max_steps = max_steps
+        self.every_seconds = every_minutes * 60.0
+        self.session_start = time.monotonic()
+        self.wall_before_session = float(progress["wall_seconds"])
+        self.last_checkpoint = self.session_start
+        self.csv_file: TextIO | None = None
+        self.writer: csv.DictWriter | None = None
+        self.episode_returns: dict[int, float] = {}
+
+    def wall_seconds(self) -> float:
+        return self.wall_before_session + time.monotonic() - self.session_start
+
+    def _on_training_start(self) -> None:
+        self.csv_file = open(self.out / "episodes.csv", "a", newline="")  # noqa: SIM115
+        self.writer = csv.DictWriter(self.csv_file, fieldnames=EPISODE_FIELDS)
+
+    def _on_step(self) -> bool:
+        steps = zip(self.locals["dones"], self.locals["infos"], self.locals["rewards"])
+        for i, (done, info, reward) in enumerate(steps):
+            self.episode_returns[i] = self.episode_returns.get(i, 0.0) + float(reward)
+            if done:
+                assert self.writer is not None  # opened at training start
+                self.writer.writerow({
+                    "timestep": self.num_timesteps,
+                    "wall_seconds": round(self.wall_seconds(), 1),
+                    "num_objects": info.get("num_objects"),
+                    "success": int(bool(info.get("is_success"))),
+                    "actions": info.get("action_count"),
+                    "return": self.episode_returns.pop(i),
+                    "fell": int(bool(info.get("fell"))),
+                })
+                self.progress["episodes"] += 1
+        now = time.monotonic()
+        if now - self.last_checkpoint >= self.every_seconds:
+            self.checkpoint()
+        return self.wall_seconds() < self.budget_seconds and self.num_timesteps < self.max_steps
+
+    def _on_training_end(self) -> None:
+        self.checkpoint()
+        if self.csv_file is not None:
+            self.csv_file.close()
+
+    def checkpoint(self) -> None:
+        if self.csv_file is not None:
+            self.csv_file.flush()
+        model = self.model
+        assert isinstance(model, PixelDoubleDQN)
+        model.save(self.out / "model.zip")
+        model.save_replay_buffer(self.out / "replay.pkl")
+        self.progress.update(
+            wall_seconds=round(self.wall_seconds(), 1),
+            timesteps=model.num_timesteps,
+            curriculum=model.curriculum_state,
+        )
+        write_json_atomically(self.out / "progress.json", self.progress)
+        if self.mirror is not None:
+            copy_checkpoint(self.out, self.mirror)
+        self.last_checkpoint = time.monotonic()
+        print(f"[{self.progress['wall_seconds'] / 60:6.1f} min] checkpoint at step {model.num_timesteps}, "
+              f"N = {(model.curriculum_state or {}).get('value')}", flush=True)
+
+
+MIRRORED = ("model.zip", "episodes.csv", "progress.json")  # progress last: it vouches for the others
+
+
+def copy_checkpoint(src: pathlib.Path, dst: pathlib.Path) -> None:
+    """Copy a run's checkpoint but its replay buffer (``MIRRORED`` files and ``tb/``), each file atomically."""
+    for name in MIRRORED:
+        if (src / name).exists():
+            copy_atomically(src / name, dst / name)
+    if (src / "tb").is_dir():
+        for path in sorted((src / "tb").rglob("*")):
+            target = dst / path.relative_to(src)
+            if path.is_file() and (not target.exists() or target.stat().st_size != path.stat().st_size):
+                copy_atomically(path, target)
+
+
+def truncate_csv(path: pathlib.Path, rows: int) -> None:
+    """Keep the header and the first ``rows`` episode rows (those covered by the checkpoint)."""
+    if not path.exists():
+        write_text_atomically(path, ",".join(EPISODE_FIELDS) + "\r\n")  # csv's header line
+        return
+    lines = path.read_text().splitlines(keepends=True)
+    write_text_atomically(path, "".join(lines[: rows + 1]))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Train (or resume) as the flags say; 0 when done, 2 with one line on stderr for bad input."""
+    args = parse_args(argv)
+    try:
+        if args.hours <= 0 or args.max_steps < 1 or args.checkpoint_minutes < 0 or args.threads < 1:
+            raise ValueError("--hours and --max-steps must be > 0, --checkpoint-minutes >= 0, --threads >= 1")
+        mirrored = args.mirror is not None and (args.mirror / "model.zip").exists()
+        resuming = (args.out / "model.zip").exists() or mirrored
+        if not resuming:  # a fresh run: its configuration is checked before anything is written
+            config_from_args(args)  # TrainConfig checks its fields and values
+    except ValueError as err:
+        print(f"shelf-train: error: {err}", file=sys.stderr)
+        return 2
+    th.set_num_threads(args.threads)
+    train(args)
+    return 0
+
+
+def train(args: argparse.Namespace) -> None:
+    """The run of ``main``, arguments checked."""
+    args.out.mkdir(parents=True, exist_ok=True)
+    progress_path = args.out / "progress.json"
+    if args.mirror is not None and not (args.out / "model.zip").exists() and (args.mirror / "model.zip").exists():
+        copy_checkpoint(args.mirror, args.out)  # a fresh machine: start from the committed checkpoint
+        print(f"starting from the checkpoint in {args.mirror}", flush=True)
+    resume = (args.out / "model.zip").exists() and progress_path.exists()
+    if resume:  # the run's own configuration wins over the flags
+        progress = json.loads(progress_path.read_text())
+        config = TrainConfig.from_dict(progress["config"])
+    else:
+        config = config_from_args(args)
+        progress = {"wall_seconds": 0.0, "timesteps": 0, "episodes": 0, "demo_seconds": 0.0,
+                    "args": {k: str(v) for k, v in vars(args).items()}, "config": config.to_dict()}
+    env = make_env(config)
+    if resume:
+        model = PixelDoubleDQN.load(args.out / "model.zip", env=env, tensorboard_log=str(args.out / "tb"))
+        print(f"resuming at step {model.num_timesteps}, {progress['wall_seconds'] / 60:.1f} min used", flush=True)
+        if (args.out / "replay.pkl").exists():
+            model.load_replay_buffer(args.out / "replay.pkl")
+        else:  # refill before learning again, as a fresh run does
+            model.learning_starts = model.num_timesteps + config.learning_starts
+            print("no replay.pkl: resuming from the weights, the curriculum stage and epsilon with an empty "
+                  f"buffer (demonstrations are collected again; learning resumes after step {model.learning_starts})",
+                  flush=True)
+    else:
+        model = make_model(config, env, seed=args.seed, tensorboard_log=str(args.out / "tb"))
+    demos = demo_policy(config, env)
+    buffer = model.replay_buffer
+    assert isinstance(buffer, HindsightRelabelReplayBuffer)
+    if demos is not None and buffer.demonstrations is None:
+        start = time.monotonic()
+        per_n = max(1, config.demo_steps // len(config.demo_objects))
+        capacity = 2 * per_n * len(config.demo_objects)
+        for n in config.demo_objects:
+            env.get_wrapper_attr("set_num_objects")(n)
+            stats = model.collect_demonstrations(demos, per_n, capacity=capacity)
+            print(f"demonstrations: {config.demo_policy} at N = {n}, {stats['steps']} steps, {stats['episodes']} "
+                  f"episodes, {stats['successes']} sorted", flush=True)
+        seconds = time.monotonic() - start
+        progress["wall_seconds"] += seconds
+        progress["demo_seconds"] = progress.get("demo_seconds", 0.0) + seconds
+        print(f"demonstrations took {seconds:.0f} s", flush=True)
+    truncate_csv(args.out / "episodes.csv", progress["episodes"])
+    budget = BudgetAndCheckpoint(args.out, progress, args.hours, args.max_steps, args.checkpoint_minutes, args.mirror)
+    if budget.wall_seconds() >= budget.budget_seconds or model.num_timesteps >= args.max_steps:
+        print("budget already spent; nothing to do")
+        return
+    curriculum = make_curriculum(config, seed=args.seed)
+    model.learn(10**9, callback=CallbackList([curriculum, budget]), log_interval=5, reset_num_timesteps=not resume)
+    print(f"done: {model.num_timesteps} steps, {progress['wall_seconds'] / 60:.1f} min, "
+          f"curriculum {(model.curriculum_state or {}).get('history')}", flush=True)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
