@@ -5,7 +5,7 @@
 """
 
 from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer
-from sb3_pixeldqn.callbacks import CurriculumCallback
+from sb3_pixeldqn.callbacks import CurriculumCallback, QMapImageCallback
 from sb3_pixeldqn.pixel_dqn import PixelDoubleDQN
 from sb3_pixeldqn.policies import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, FCNPolicy
 
@@ -16,4 +16,5 @@ __all__ = [
     "FCNPolicy",
     "HindsightRelabelReplayBuffer",
     "PixelDoubleDQN",
+    "QMapImageCallback",
 ]

@@ -228,3 +228,43 @@ class CurriculumCallback(BaseCallback):
             "eval_rng": self.eval_rng.bit_generator.state,
         }
         self.model.curriculum_state = state  # type: ignore[attr-defined]
+
+
+class QMapImageCallback(BaseCallback):
+    """Log what the network values as TensorBoard images, every ``every`` env steps.
+
+    For the current observation of the first training env: ``images/observation`` (its first three
+    channels as RGB, the env's view) and one ``images/q_<map>`` per Q-map (pick, push_0, push_180,
+    ...), each min-max normalised to [0, 1] (bright = high value). Images reach TensorBoard at the
+    logger's next dump (every ``log_interval`` episodes), so ``every`` should be a multiple of the
+    episode length or larger. Text outputs (stdout, csv, json) never see them.
+
+    :param every: env steps between two logged sets of images (>= 1).
+    """
+
+    def __init__(self, every: int = 1000, verbose: int = 0) -> None:
+        super().__init__(verbose)
+        if every < 1:
+            raise ValueError(f"every must be >= 1, got {every}")
+        self.every = int(every)
+        self._last = 0
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps - self._last >= self.every:
+            self._last = self.num_timesteps
+            self.log_images()
+        return True
+
+    def log_images(self) -> None:
+        """Record the observation and Q-map images of the first env's current observation."""
+        from stable_baselines3.common.logger import Image
+
+        obs = np.asarray(self.model._last_obs)[0]
+        q = self.model.policy.q_map_values(obs)  # type: ignore[operator]
+        exclude = ("stdout", "log", "json", "csv")
+        self.logger.record("images/observation", Image(np.ascontiguousarray(obs[:3]), "CHW"), exclude=exclude)
+        names = [f"{name}_{degrees}" if degrees else name for name, degrees in self.model.policy.maps]  # type: ignore[union-attr]
+        for name, q_map in zip(names, q):
+            span = float(q_map.max() - q_map.min())
+            scaled = (q_map - q_map.min()) / span if span > 0 else np.zeros_like(q_map)
+            self.logger.record(f"images/q_{name}", Image(scaled.astype(np.float32), "HW"), exclude=exclude)

@@ -89,6 +89,8 @@ class TrainConfig:
     eval_actions_per_object: float = 0.0
     # lever 8: hindsight relabelling ("changed", "all", "off")
     relabel: str = "changed"
+    # TensorBoard images of the observation and the Q-maps every this many env steps (0: none)
+    tb_images_every: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -117,6 +119,8 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.pixel_size must be in [0.002, 0.02] m, got {self.pixel_size}")
         if self.batch_size < 1 or self.buffer_size < 1 or self.gradient_steps < 1 or self.learning_rate <= 0:
             raise ValueError("TrainConfig needs batch_size, buffer_size, gradient_steps >= 1 and learning_rate > 0")
+        if self.tb_images_every < 0:
+            raise ValueError(f"TrainConfig.tb_images_every must be >= 0, got {self.tb_images_every}")
 
     def replace(self, **changes: Any) -> TrainConfig:
         unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
@@ -222,6 +226,16 @@ def eval_action_limit(config: TrainConfig) -> int | Callable[[int], int] | None:
     if per_object <= 0:
         return fixed
     return lambda n: max(fixed or 0, math.ceil(per_object * n))
+
+
+def make_callbacks(config: TrainConfig, seed: int = 0, verbose: int = 1) -> list[Any]:
+    """The training callbacks of ``config``: its curriculum, and Q-map images if it asks for them."""
+    from sb3_pixeldqn import QMapImageCallback
+
+    callbacks = [make_curriculum(config, seed=seed, verbose=verbose)]
+    if config.tb_images_every:
+        callbacks.append(QMapImageCallback(every=config.tb_images_every))
+    return callbacks
 
 
 def make_curriculum(config: TrainConfig, seed: int = 0, verbose: int = 1) -> Any:

@@ -128,3 +128,23 @@ def test_greedy_check_action_limit_may_grow_with_the_stage():
         cb.init_callback(model)
         cb.value = 3
         assert cb.greedy_success() == expected
+
+
+def test_q_map_images_reach_tensorboard(tmp_path):
+    from pixel_envs import FindTheSquareEnv
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    from sb3_pixeldqn import QMapImageCallback
+
+    kw = {**KW, "policy_kwargs": dict(maps=[("pick", 0), ("push", 0), ("push", 180)], widths=(4, 8, 8))}
+    model = PixelDoubleDQN("FCNPolicy", FindTheSquareEnv(n_maps=3), tensorboard_log=str(tmp_path), **kw)
+    model.learn(12, callback=QMapImageCallback(every=4), log_interval=1)
+    (run,) = glob.glob(str(tmp_path / "PixelDoubleDQN_*"))
+    events = EventAccumulator(run, size_guidance={"images": 0})
+    events.Reload()
+    tags = set(events.Tags()["images"])
+    assert {"images/observation", "images/q_pick", "images/q_push", "images/q_push_180"} <= tags
+    (first, *_) = events.Images("images/q_pick")
+    assert first.width == 20 and first.height == 12
+    with pytest.raises(ValueError, match="every must be >= 1"):
+        QMapImageCallback(every=0)

@@ -113,3 +113,14 @@ def test_eval_action_limit_grows_with_objects_only_when_asked():
     assert eval_action_limit(PRESETS["recipe"]) == 20
     limit = eval_action_limit(PRESETS["recipe"].replace(eval_actions_per_object=3.0))
     assert [limit(n) for n in (1, 6, 7, 8)] == [20, 20, 21, 24]
+
+
+def test_callbacks_include_q_map_images_only_when_asked():
+    from sb3_pixeldqn import CurriculumCallback, QMapImageCallback
+    from shelf_env.training import make_callbacks
+
+    assert [type(c) for c in make_callbacks(PRESETS["recipe"], verbose=0)] == [CurriculumCallback]
+    with_images = make_callbacks(PRESETS["recipe"].replace(tb_images_every=500), verbose=0)
+    assert [type(c) for c in with_images] == [CurriculumCallback, QMapImageCallback] and with_images[1].every == 500
+    with pytest.raises(ValueError, match="tb_images_every"):
+        PRESETS["recipe"].replace(tb_images_every=-1)

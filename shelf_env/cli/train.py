@@ -37,7 +37,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import HindsightRelabelReplayBuffer, PixelDoubleDQN
 from sb3_pixeldqn.files import copy_atomically, write_json_atomically, write_text_atomically
-from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_curriculum, make_env, make_model
+from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_callbacks, make_env, make_model
 
 EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
 
@@ -264,8 +264,8 @@ def train(args: argparse.Namespace) -> None:
     if budget.wall_seconds() >= budget.budget_seconds or model.num_timesteps >= args.max_steps:
         print("budget already spent; nothing to do")
         return
-    curriculum = make_curriculum(config, seed=args.seed)
-    model.learn(10**9, callback=CallbackList([curriculum, budget]), log_interval=5, reset_num_timesteps=not resume)
+    callbacks = [*make_callbacks(config, seed=args.seed), budget]
+    model.learn(10**9, callback=CallbackList(callbacks), log_interval=5, reset_num_timesteps=not resume)
     print(f"done: {model.num_timesteps} steps, {progress['wall_seconds'] / 60:.1f} min, "
           f"curriculum {(model.curriculum_state or {}).get('history')}", flush=True)
 
