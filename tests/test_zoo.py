@@ -1,0 +1,67 @@
+"""rl-zoo3: the generated hyper-parameter file, a 48-step training run through rl-zoo3's own entry
+point (model zip where rl-zoo3 saves it), then rl-zoo3's enjoy and record_video on the result."""
+
+from __future__ import annotations
+
+import pathlib
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+pytest.importorskip("rl_zoo3", reason="the zoo extra: pip install '.[zoo]'")
+
+from sb3_pixeldqn import PixelDoubleDQN  # noqa: E402
+from shelf_env.training import PRESETS  # noqa: E402
+from shelf_env.zoo import HYPERPARAMS, RecipeCallback, write_hyperparams, zoo_hyperparams  # noqa: E402
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def test_committed_yml_is_generated_from_the_recipe_preset(tmp_path):
+    assert HYPERPARAMS.read_text() == write_hyperparams(tmp_path / "x.yml")
+    entry = yaml.safe_load(HYPERPARAMS.read_text())["ShelfSort-v0"]
+    recipe = PRESETS["recipe"]
+    assert entry["learning_rate"] == recipe.learning_rate and entry["target_update_interval"] == 100
+    assert entry["env_kwargs"]["pixel_size"] == recipe.pixel_size
+    (callback,) = entry["callback"]
+    fields = callback["shelf_env.zoo.RecipeCallback"]
+    assert fields["augment"] == ["mirror", "permute"] and fields["demo_policy"] == "h-a" and fields["gate"] == "greedy"
+    # every TrainConfig field is in the file exactly once (but `extra`), so the preset is the one place
+    flat = set(entry) | set(entry["env_kwargs"]) | set(fields) | {"widths", "relabel", "noop", "noop_penalty"}
+    assert {f for f in recipe.to_dict() if f != "extra"} <= flat
+
+
+def _run(script: str, *args: str, cwd: pathlib.Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(ROOT / "examples" / script), *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=600)
+
+
+def test_48_steps_with_rl_zoo3_then_enjoy_and_record(tmp_path):
+    config = PRESETS["recipe"].replace(demo_steps=8, widths=(4, 8, 8), learning_starts=8, eval_every=16,
+                                       eval_episodes=2, buffer_size=200, pixel_size=0.02)
+    conf = tmp_path / "small.yml"
+    conf.write_text(yaml.safe_dump(zoo_hyperparams(config, n_timesteps=48), sort_keys=False))
+    common = ["--algo", "pixel_double_dqn", "--env", "ShelfSort-v0", "-f", str(tmp_path / "logs")]
+    out = _run("zoo_train.py", *common, "--gym-packages", "shelf_env", "-conf", str(conf), "--eval-freq", "-1",
+               "--num-threads", "1", "--seed", "0", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "demonstrations: h-a" in out.stdout and "curriculum: greedy success" in out.stdout
+    zip_path = tmp_path / "logs" / "pixel_double_dqn" / "ShelfSort-v0_1" / "ShelfSort-v0.zip"
+    model = PixelDoubleDQN.load(zip_path)
+    assert model.num_timesteps >= 48 and model.observation_space.shape == (4, 20, 30)
+    assert model.curriculum_state["value"] >= 1 and model.target_update_interval == 100
+
+    enjoy = _run("zoo_enjoy.py", *common, "--gym-packages", "shelf_env", "-n", "5", "--no-render",
+                 "--num-threads", "1", cwd=tmp_path)
+    assert enjoy.returncode == 0, enjoy.stderr[-3000:]
+    record = _run("zoo_record.py", *common, "-n", "3", cwd=tmp_path)
+    assert record.returncode == 0, record.stderr[-3000:]
+    assert list((zip_path.parent / "videos").glob("*.mp4"))
+
+
+def test_recipe_callback_refuses_fields_no_run_could_use():
+    callback = RecipeCallback(gate="sometimes")
+    with pytest.raises(ValueError, match="gate must be one of"):
+        PRESETS["recipe"].replace(**callback.fields)
