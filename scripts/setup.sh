@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Create .venv (if missing) and install the project with its test, extra and zoo dependencies.
+# Create .venv (if missing) and install the project with its test, extra, zoo and ray dependencies.
 # CPU torch 2.13.0 goes first: any other torch request may pull gigabytes of CUDA packages.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -8,4 +8,4 @@ if [ ! -x .venv/bin/python ]; then
 fi
 . .venv/bin/activate
 pip install --quiet torch==2.13.0
-pip install --quiet -e ".[test,extra,zoo]"
+pip install --quiet -e ".[test,extra,zoo,ray]"

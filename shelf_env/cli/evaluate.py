@@ -10,6 +10,13 @@ the cells already on disk, so an interrupted evaluation resumes. At the end (or 
 ``--summarize-only``) it writes ``results.csv``, ``results.json`` (with this configuration) and
 ``sr_ae_mae_<set>.png`` (Fig. 10), plus ``train_vs_test.png`` (Fig. 12) when both object sets
 were evaluated.
+
+Backends: ``--backend local`` (default) runs the cells in ``--workers`` local processes;
+``--backend ray`` runs them as Ray tasks (the ``ray`` extra), on a local Ray instance with
+``--workers`` CPUs or, with ``--ray-address host:port`` (or ``ray://host:port``, ``auto``), on an
+existing cluster whose nodes have this project installed. The driver writes each cell as it
+returns, so both backends leave the same resumable files, and the same records: episodes are
+history-free (`shelf_env.env`), so a cell's records depend only on (policy, N, seed, runs).
 """
 
 from __future__ import annotations
@@ -18,12 +25,18 @@ import argparse
 import multiprocessing as mp
 import os
 import pathlib
+import socket
 import sys
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Any
 
 from tqdm import tqdm
 
 from shelf_env import evaluation as ev
+
+#: A cell: (policy, N, seed, object set).
+Job = tuple[str, int, int, str]
 
 
 def parse_ns(text: str) -> list[int]:
@@ -49,6 +62,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--out", type=pathlib.Path, required=True)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--summarize-only", action="store_true", help="only aggregate the cells already on disk")
+    p.add_argument("--backend", choices=["local", "ray"], default="local",
+                   help="local worker processes (default) or Ray tasks (the ray extra)")
+    p.add_argument("--ray-address", default=None,
+                   help="an existing Ray cluster (host:port, ray://host:port or auto); default: a local Ray "
+                        "instance with --workers CPUs")
     return p.parse_args(argv)
 
 
@@ -65,6 +83,69 @@ def _run_cell(policy: str, n: int, seed: int, runs: int, object_set: str, path: 
     return True
 
 
+def run_local(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, workers: int) -> None:
+    """Every cell of ``todo`` in a worker process; each worker writes its cell when done."""
+    ctx = mp.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = [pool.submit(_run_cell, p, n, s, runs, o, str(paths[(p, n, s, o)]), os.getpid())
+                   for p, n, s, o in todo]
+        for future in tqdm(as_completed(futures), total=len(futures), desc="cells", unit="cell"):
+            future.result()
+
+
+def check_ray_address(address: str | None, timeout: float = 5.0) -> None:
+    """A `ValueError` naming ``address`` when no Ray cluster answers there (Ray itself retries for minutes)."""
+    if address in (None, "auto", "local"):
+        return
+    assert address is not None
+    host_port = address.removeprefix("ray://").rsplit(":", 1)
+    if len(host_port) != 2 or not host_port[1].isdigit():
+        raise ValueError(f"--ray-address must be host:port, ray://host:port or auto, got {address!r}")
+    try:
+        socket.create_connection((host_port[0], int(host_port[1])), timeout=timeout).close()
+    except OSError as err:
+        raise ValueError(f"cannot reach a Ray cluster at {address}: {err}") from err
+
+
+def _ray_cell(policy: str, checkpoint: bytes | None, n: int, seed: int, runs: int,
+              object_set: str) -> list[ev.EpisodeRecord]:
+    """One cell on a Ray worker. A checkpoint travels as bytes (a cluster's nodes need not share the
+    driver's disk) and is written under its own file name, so the records carry the same label."""
+    import tempfile
+
+    import torch
+
+    torch.set_num_threads(1)
+    if checkpoint is None:
+        return ev.evaluate_cell(policy, n, seed, runs, object_set)
+    with tempfile.TemporaryDirectory() as tmp:
+        local = pathlib.Path(tmp) / pathlib.Path(policy).name
+        local.write_bytes(checkpoint)
+        return ev.evaluate_cell(str(local), n, seed, runs, object_set)
+
+
+def run_ray(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, workers: int, address: str | None) -> None:
+    """Every cell of ``todo`` as a Ray task (one CPU each); the driver writes each cell as it returns."""
+    import ray
+
+    try:
+        if address in (None, "local"):
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
+        else:
+            ray.init(address=address, log_to_driver=False, ignore_reinit_error=True)
+    except Exception as err:  # noqa: BLE001  (Ray raises several types for an unusable cluster)
+        raise ValueError(f"cannot start or reach Ray ({address or 'local'}): {err}") from err
+    cell = ray.remote(num_cpus=1)(_ray_cell)
+    blobs: dict[str, Any] = {p: ray.put(pathlib.Path(p).read_bytes())
+                             for p in {job[0] for job in todo} if p not in ev.NAMED_POLICIES}
+    pending = {cell.remote(p, blobs.get(p), n, s, runs, o): (p, n, s, o) for p, n, s, o in todo}
+    with tqdm(total=len(pending), desc="cells (ray)", unit="cell") as bar:
+        while pending:
+            (ref,), _ = ray.wait(list(pending), num_returns=1)
+            ev.save_cell(paths[pending.pop(ref)], ray.get(ref))
+            bar.update()
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:  # every bad input is reported before any episode runs, in one line
@@ -73,6 +154,14 @@ def main(argv: list[str] | None = None) -> int:
         ns = ev.check_ns(args.ns)
         if args.runs < 1 or args.seeds < 1 or args.workers < 1:
             raise ValueError("--runs, --seeds and --workers must be >= 1")
+        if args.backend == "ray":
+            try:
+                import ray  # noqa: F401
+            except ImportError as err:
+                raise ValueError("--backend ray needs Ray: pip install '.[ray]'") from err
+            check_ray_address(args.ray_address)
+        elif args.ray_address is not None:
+            raise ValueError("--ray-address needs --backend ray")
     except ValueError as err:
         print(f"shelf-evaluate: error: {err}", file=sys.stderr)
         return 2
@@ -84,12 +173,16 @@ def main(argv: list[str] | None = None) -> int:
     todo = [job for job in jobs if not paths[job].exists()]
     print(f"{len(jobs)} cells, {len(jobs) - len(todo)} already on disk, {len(todo)} to run", flush=True)
     if todo and not args.summarize_only:
-        ctx = mp.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx) as pool:
-            futures = [pool.submit(_run_cell, p, n, s, args.runs, o, str(paths[(p, n, s, o)]), os.getpid())
-                       for p, n, s, o in todo]
-            for future in tqdm(as_completed(futures), total=len(futures), desc="cells", unit="cell"):
-                future.result()
+        start = time.perf_counter()
+        if args.backend == "ray":
+            try:
+                run_ray(todo, paths, args.runs, args.workers, args.ray_address)
+            except ValueError as err:
+                print(f"shelf-evaluate: error: {err}", file=sys.stderr)
+                return 2
+        else:
+            run_local(todo, paths, args.runs, args.workers)
+        print(f"{len(todo)} cells in {time.perf_counter() - start:.1f} s ({args.backend} backend)", flush=True)
     done = [job for job in jobs if paths[job].exists()]
     if not done:
         print("no finished cells yet")
