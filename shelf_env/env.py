@@ -31,6 +31,10 @@ ends valid with every object inside some target region but not all in their own,
 recoloured with every object's class replaced by the class of the region it is in, reward 0,
 terminated True. The action is unchanged.
 
+``perception_noise`` (off by default; `shelf_env.perception`): segmentation dropout of whole
+objects or parts, class flips and depth noise on every capture, seeded per episode; the policy's
+observation, the masks and the env's own planning see the noisy map, rewards the true state.
+
 ``sleeping=True`` (default) lets objects at rest sleep in Bullet between contacts, which makes
 actions cheaper with many objects (`benchmarks/sleeping.py`); ``sleeping=False`` simulates every object at every physics
 step (see `shelf_env.world`).
@@ -49,6 +53,7 @@ from shelf_env import params, task
 from shelf_env.actions import PRIMITIVES, ActionCodec, clip_target, map_names
 from shelf_env.camera import CLASS_RGB, CameraConfig, HeightmapCamera, recolour, region_masks
 from shelf_env.objects import OBJECT_SETS, ObjectSpec, sample_specs
+from shelf_env.perception import PerceptionNoise
 from shelf_env.placement import place_position
 from shelf_env.robot import Primitives, Robot
 from shelf_env.world import Region, World, sample_regions
@@ -64,6 +69,8 @@ class ShelfSortEnv(gym.Env):
     observation_space: gym.spaces.Box
     action_space: gym.spaces.Discrete
     client: int | None
+    perception_noise: PerceptionNoise | None
+    _noise_rng: np.random.Generator | None
     max_objects: int
     num_objects: int
     object_set: str
@@ -97,6 +104,7 @@ class ShelfSortEnv(gym.Env):
         camera: CameraConfig | None = None,
         max_objects: int = params.MAX_OBJECTS,
         sleeping: bool = True,
+        perception_noise: PerceptionNoise | dict | None = None,
     ) -> None:
         if object_set not in OBJECT_SETS:
             raise ValueError(f"unknown object_set {object_set!r}; expected one of {OBJECT_SETS}")
@@ -112,6 +120,9 @@ class ShelfSortEnv(gym.Env):
             raise ValueError(f"max_objects must be in [1, {params.MAX_OBJECTS}], got {max_objects}")
         if not 0.002 <= pixel_size <= 0.02:
             raise ValueError(f"pixel_size must be in [0.002, 0.02] m, got {pixel_size}")
+        #: `shelf_env.perception.PerceptionNoise` applied to every capture (None: exact perception).
+        self.perception_noise = PerceptionNoise.from_any(perception_noise)
+        self._noise_rng = None
         self.max_objects = int(max_objects)
         self.num_objects = self._check_num_objects(num_objects)
         self.object_set = object_set
@@ -196,6 +207,8 @@ class ShelfSortEnv(gym.Env):
         self.action_count = 0
         # N of this episode: set_num_objects during an episode only affects the next reset
         self.episode_num_objects = len(self.world.objects)
+        if self.perception_noise is not None and self.perception_noise.active:  # its own stream, per episode
+            self._noise_rng = np.random.default_rng(int(self.np_random.integers(2**63)))
         judgement = task.judge(self.world)
         self.num_unsorted_initial = int((judgement.region != judgement.classes).sum())
         self._obs = self._observe()
@@ -256,8 +269,13 @@ class ShelfSortEnv(gym.Env):
 
     def _observe(self) -> np.ndarray:
         uids = np.array([o.uid for o in self.world.objects], dtype=np.int64)
-        self._semantic = self.camera.semantic_map(uids)
-        return recolour(*self._semantic, self._class_of_uid(), self._regions_mask)
+        cell_uid, height = self.camera.semantic_map(uids)
+        shown = self._class_of_uid()
+        if self._noise_rng is not None:
+            assert self.perception_noise is not None
+            cell_uid, height, shown = self.perception_noise.apply(cell_uid, height, shown, self._noise_rng)
+        self._semantic = (cell_uid, height)
+        return recolour(cell_uid, height, shown, self._regions_mask)
 
     def _observed_semantic(self) -> tuple[np.ndarray, np.ndarray]:
         """The semantic map (cell uid, height) of the last observation."""
@@ -323,6 +341,7 @@ class ShelfSortEnv(gym.Env):
         object, so it can only waste an action (an object covers ~1 % of the map). It reads only
         what the observation shows: the visible object cells. It is mirror-symmetric across the
         cabinet's width (push-left at col c <-> push-right at col W-1-c) and blind to classes.
+        When no object is visible at all, every action is allowed (the mask has nothing to say).
         """
         if self._semantic is None:
             raise RuntimeError("call reset() before action_masks()")
@@ -339,7 +358,10 @@ class ShelfSortEnv(gym.Env):
             "push_left": (counts[:, cols + 1] - counts[:, np.maximum(cols - reach, 0)]) > 0,
             "push_right": (counts[:, np.minimum(cols + reach, self.cols - 1) + 1] - counts[:, cols]) > 0,
         }
-        return np.concatenate([masks[name].reshape(-1) for name in self.map_names])
+        mask = np.concatenate([masks[name].reshape(-1) for name in self.map_names])
+        if not mask.any():  # nothing visible (e.g. perception noise dropped every object): no guidance
+            mask[:] = True
+        return mask
 
     def _place_for(self, uid: int) -> tuple[float, float]:
         """Tool (x, y) that puts the held object's centre where the place heuristic wants it.
