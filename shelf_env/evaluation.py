@@ -53,6 +53,41 @@ class EpisodeRecord:
     num_unsorted_initial: int
     fell: bool
     noops: int = 0  # actions that left the observation unchanged
+    #: Why an unsuccessful episode failed (`FAILURES`), "" when it succeeded (or for cells written
+    #: before this field existed).
+    failure: str = ""
+    max_repeat: int = 0  # longest run of one action repeated back to back
+
+
+#: Failure categories of `classify_failure`, from the episode's trace.
+FAILURES = ("fell", "unstable", "wrong_class", "loop", "timeout")
+#: A time-out is a loop when at least this share of its actions left the observation unchanged,
+#: or one action was repeated back to back at least ``LOOP_REPEAT`` times.
+LOOP_NOOP_SHARE = 0.5
+LOOP_REPEAT = 5
+
+
+def classify_failure(success: bool, fell: bool, terminated: bool, actions: int, noops: int, max_repeat: int,
+                     all_in_regions: bool) -> str:
+    """Why an episode failed, from its trace ("" if it succeeded):
+
+    - ``fell``: an object left the cabinet (the env's drag failure, §V-d);
+    - ``unstable``: the episode ended invalid without a fall (an object not at rest);
+    - ``wrong_class``: it ran out of actions with every object in some region, not all in their own;
+    - ``loop``: it ran out of actions repeating itself (`LOOP_NOOP_SHARE`, `LOOP_REPEAT`);
+    - ``timeout``: it ran out of actions otherwise.
+    """
+    if success:
+        return ""
+    if fell:
+        return "fell"
+    if terminated:
+        return "unstable"
+    if all_in_regions:
+        return "wrong_class"
+    if noops >= LOOP_NOOP_SHARE * max(actions, 1) or max_repeat >= LOOP_REPEAT:
+        return "loop"
+    return "timeout"
 
 
 def scene_seed(seed: int, num_objects: int, run: int) -> int:
@@ -147,18 +182,24 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
     obs, info = env.reset(seed=reset_seed)
     unsorted = info["num_unsorted_initial"]
     masked = takes_action_masks(policy)
-    noops = 0
+    noops, repeat, max_repeat, last = 0, 0, 0, None
     while True:
         kwargs = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
         action, _ = policy.predict(obs, deterministic=True, **kwargs)
-        next_obs, _, terminated, truncated, info = env.step(int(np.asarray(action).reshape(-1)[0]))
+        action = int(np.asarray(action).reshape(-1)[0])
+        next_obs, _, terminated, truncated, info = env.step(action)
         noops += unchanged(obs, next_obs)
+        repeat = repeat + 1 if action == last else 1
+        max_repeat, last = max(max_repeat, repeat), action
         obs = next_obs
         if terminated or truncated:
             break
-    actions = info["action_count"]
-    return {"success": bool(info["is_success"]) and actions < max_actions, "actions": int(actions),
-            "num_unsorted_initial": int(unsorted), "fell": bool(info["fell"]), "noops": noops}
+    actions = int(info["action_count"])
+    success = bool(info["is_success"]) and actions < max_actions
+    failure = classify_failure(success, bool(info["fell"]), bool(terminated), actions, noops, max_repeat,
+                               "relabelled" in info)
+    return {"success": success, "actions": actions, "num_unsorted_initial": int(unsorted), "fell": bool(info["fell"]),
+            "noops": noops, "failure": failure, "max_repeat": max_repeat}
 
 
 def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_set: str = "ycb",
@@ -179,8 +220,9 @@ def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_se
 
 
 # ---------------------------------------------------------------- metrics
-def episode_summary(records: list[EpisodeRecord]) -> dict[str, float]:
-    """Sorted count, SR (%), mean actions per success, share of unchanged-observation actions, falls."""
+def episode_summary(records: list[EpisodeRecord]) -> dict[str, Any]:
+    """Sorted count, SR (%), mean actions per success, share of unchanged-observation actions, falls,
+    and the count of each failure category (`FAILURES`)."""
     ok = [r for r in records if r.success]
     actions = sum(r.actions for r in records)
     return {
@@ -188,6 +230,7 @@ def episode_summary(records: list[EpisodeRecord]) -> dict[str, float]:
         "actions_per_success": float(np.mean([r.actions for r in ok])) if ok else math.nan,
         "noop_share": sum(r.noops for r in records) / max(1, actions),
         "fell": sum(r.fell for r in records),
+        "failures": {kind: sum(r.failure == kind for r in records) for kind in FAILURES},
     }
 
 
@@ -215,7 +258,10 @@ def summarize(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
             finite = values[np.isfinite(values)]
             row[f"{key}_mean"] = float(finite.mean()) if finite.size else math.nan
             row[f"{key}_std"] = float(finite.std()) if finite.size else math.nan
-        row["fell_rate"] = float(np.mean([r.fell for rs in by_seed.values() for r in rs]))
+        everything = [r for rs in by_seed.values() for r in rs]
+        row["fell_rate"] = float(np.mean([r.fell for r in everything]))
+        for kind in FAILURES[1:]:  # shares of all episodes; cells from before `failure` existed count none
+            row[f"{kind}_rate"] = float(np.mean([r.failure == kind for r in everything]))
         row["noop_share"] = episode_summary([r for rs in by_seed.values() for r in rs])["noop_share"]
         rows.append(row)
     return rows

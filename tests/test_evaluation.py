@@ -128,3 +128,31 @@ def test_cli_writes_results_and_resumes(tmp_path, capsys):
     assert (tmp_path / "results.csv").exists() and (tmp_path / "sr_ae_mae_train.png").stat().st_size > 10_000
     assert evaluate_cli.main(argv) == 0
     assert "2 already on disk, 0 to run" in capsys.readouterr().out
+
+
+def test_failure_categories_from_the_trace():
+    c = ev.classify_failure
+    assert c(True, False, True, 3, 0, 1, False) == ""
+    assert c(False, True, True, 3, 0, 1, False) == "fell"
+    assert c(False, False, True, 3, 0, 1, False) == "unstable"
+    assert c(False, False, False, 40, 0, 1, True) == "wrong_class"
+    assert c(False, False, False, 40, 20, 1, False) == "loop"
+    assert c(False, False, False, 40, 2, ev.LOOP_REPEAT, False) == "loop"
+    assert c(False, False, False, 40, 19, 4, False) == "timeout"
+
+
+def test_run_episode_reports_a_looping_policy_as_a_loop():
+    class SameAction:
+        def predict(self, obs, deterministic=True):
+            return np.array(0), None  # a pick in the back-left corner: empty floor, nothing changes
+
+    env = gym.make("ShelfSort-v0", num_objects=2, max_actions=6)
+    out = ev.run_episode(env, SameAction(), reset_seed=3)
+    env.close()
+    assert out["success"] is False and out["actions"] == 6 and out["noops"] >= 5  # (the first capture may differ)
+    assert out["max_repeat"] == 6 and out["failure"] == "loop"
+    record = ev.EpisodeRecord("same", "train", 2, 0, 0, **out)
+    summary = ev.episode_summary([record])
+    assert summary["failures"]["loop"] == 1 and sum(summary["failures"].values()) == 1
+    (row,) = ev.summarize([record])
+    assert row["loop_rate"] == 1.0 and row["timeout_rate"] == 0.0
