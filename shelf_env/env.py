@@ -35,6 +35,10 @@ terminated True. The action is unchanged.
 objects or parts, class flips and depth noise on every capture, seeded per episode; the policy's
 observation, the masks and the env's own planning see the noisy map, rewards the true state.
 
+``closed_loop=True`` (experimental, off by default): the pick's lift and retreat watch the cup's
+force sensor and put the carried object down when it drags a neighbour (`shelf_env.robot.DragWatch`);
+``info["interventions"]`` lists what it did.
+
 ``sleeping=True`` (default) lets objects at rest sleep in Bullet between contacts, which makes
 actions cheaper with many objects (`benchmarks/sleeping.py`); ``sleeping=False`` simulates every object at every physics
 step (see `shelf_env.world`).
@@ -55,7 +59,7 @@ from shelf_env.camera import CLASS_RGB, CameraConfig, HeightmapCamera, recolour,
 from shelf_env.objects import OBJECT_SETS, ObjectSpec, sample_specs
 from shelf_env.perception import PerceptionNoise
 from shelf_env.placement import place_position
-from shelf_env.robot import Primitives, Robot
+from shelf_env.robot import DragWatch, Primitives, Robot
 from shelf_env.world import Region, World, sample_regions
 
 SPAWN_TRIES = 100
@@ -70,6 +74,7 @@ class ShelfSortEnv(gym.Env):
     action_space: gym.spaces.Discrete
     client: int | None
     perception_noise: PerceptionNoise | None
+    drag_watch: DragWatch | None
     _noise_rng: np.random.Generator | None
     max_objects: int
     num_objects: int
@@ -105,6 +110,7 @@ class ShelfSortEnv(gym.Env):
         max_objects: int = params.MAX_OBJECTS,
         sleeping: bool = True,
         perception_noise: PerceptionNoise | dict | None = None,
+        closed_loop: bool = False,
     ) -> None:
         if object_set not in OBJECT_SETS:
             raise ValueError(f"unknown object_set {object_set!r}; expected one of {OBJECT_SETS}")
@@ -122,6 +128,8 @@ class ShelfSortEnv(gym.Env):
             raise ValueError(f"pixel_size must be in [0.002, 0.02] m, got {pixel_size}")
         #: `shelf_env.perception.PerceptionNoise` applied to every capture (None: exact perception).
         self.perception_noise = PerceptionNoise.from_any(perception_noise)
+        #: `shelf_env.robot.DragWatch` of the carried object (None: open loop, as in the paper).
+        self.drag_watch = DragWatch() if closed_loop else None
         self._noise_rng = None
         self.max_objects = int(max_objects)
         self.num_objects = self._check_num_objects(num_objects)
@@ -190,7 +198,7 @@ class ShelfSortEnv(gym.Env):
         pb.resetSimulation(physicsClientId=self.client)
         self.world = World(self.client, sleeping=self.sleeping)
         self.robot = Robot(self.client)
-        self.primitive_runner = Primitives(self.robot)
+        self.primitive_runner = Primitives(self.robot, watch=self.drag_watch)
         camera = getattr(self, "camera", None)
         if camera is not None:  # same bodies in the same order: same ids, but say so rather than assume
             camera.hidden_bodies = self.world.decorative
@@ -297,6 +305,7 @@ class ShelfSortEnv(gym.Env):
         name, row, col = self.decode_action(action)
         x, y = clip_target(*self.codec.cell_centre(row, col))
         self.world.sleep_resting()
+        self.primitive_runner.interventions.clear()
         if name == "pick":
             self._pick_and_place(x, y, float(before[1][row, col]))
         else:
@@ -312,6 +321,8 @@ class ShelfSortEnv(gym.Env):
         truncated = not judgement.terminated and self.action_count >= self.max_actions
         self._obs = self._observe()
         info = self._info(name, judgement)
+        if self.drag_watch is not None:
+            info["interventions"] = list(self.primitive_runner.interventions)
         if judgement.relabel:
             relabel = self._class_of_uid(judgement.region)
             info["relabelled"] = {
