@@ -241,8 +241,9 @@ class DragWatch:
     Each move starts with the arm accelerating to its speed, which the sensor reads as up to ~23 N
     for a few steps; the first ``blank`` steps of a move are not judged (a drag is still caught
     within ~3 cm of travel). Rule: after that, a horizontal force above ``threshold`` N for
-    ``sustain`` consecutive physics steps is a drag. Reaction: stop, lower the object straight down where it is until it lands, release it,
-    lift the cup clear and retreat; the step then ends as usual.
+    ``sustain`` consecutive physics steps is a drag. Reaction: stop, lower the object straight down
+    where it is until it lands, release it, lift the cup clear and retreat; the step then ends as
+    usual.
 
     Status (experimental, not the default): it catches the crafted drag of tests/test_closed_loop.py
     and leaves a clean pick alone, but in clutter it over-triggers. H-d on 10 YCB scenes at N = 8
