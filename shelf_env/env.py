@@ -191,7 +191,7 @@ class ShelfSortEnv(gym.Env):
         state or collision shape survives from earlier episodes. Bullet is deterministic given
         the same bodies created in the same order, so an episode's observations, rewards and
         infos depend only on (scene, actions). It costs ~10 ms per reset
-        (``benchmarks/env_step.py --reset``).
+        (``benchmarks/reset_cost.py``).
         """
         if self.client is None:
             raise RuntimeError("this ShelfSortEnv is closed")
