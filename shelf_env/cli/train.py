@@ -173,6 +173,20 @@ class BudgetAndCheckpoint(BaseCallback):
               f"N = {(model.curriculum_state or {}).get('value')}", flush=True)
 
 
+def session_record(model: PixelDoubleDQN, progress: dict, threads: int, buffer_kept: bool) -> dict[str, Any]:
+    """Where and when one run of the command started (for the model card's hardware and history)."""
+    import datetime
+    import os
+    import platform
+
+    return {
+        "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "timesteps": int(model.num_timesteps), "wall_seconds": float(progress["wall_seconds"]),
+        "machine": f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPUs", "torch_threads": int(threads),
+        "device": str(model.device), "buffer_kept": bool(buffer_kept),
+    }
+
+
 MIRRORED = ("model.zip", "episodes.csv", "progress.json")  # progress last: it vouches for the others
 
 
@@ -243,6 +257,8 @@ def train(args: argparse.Namespace) -> None:
                   flush=True)
     else:
         model = make_model(config, env, seed=args.seed, tensorboard_log=str(args.out / "tb"))
+    progress.setdefault("sessions", []).append(session_record(model, progress, args.threads,
+                                                              buffer_kept=(args.out / "replay.pkl").exists()))
     demos = demo_policy(config, env)
     buffer = model.replay_buffer
     assert isinstance(buffer, HindsightRelabelReplayBuffer)
