@@ -25,7 +25,8 @@ def test_checkpoints_count_wall_time_once_and_resume(tmp_path):
     assert progress2["timesteps"] == 7 and progress2["wall_seconds"] > progress["wall_seconds"]
     assert progress2["curriculum"]["value"] == 1
     sessions = progress2["sessions"]  # one record per run of the command, for the model card
-    assert [s["timesteps"] for s in sessions] == [0, 4] and sessions[1]["buffer_kept"] and sessions[0]["device"] == "cpu"
+    assert [s["timesteps"] for s in sessions] == [0, 4] and sessions[1]["buffer_kept"]
+    assert sessions[0]["device"] == "cpu" and sessions[0]["torch_threads"] == 1
     with open(tmp_path / "episodes.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == progress2["episodes"]
