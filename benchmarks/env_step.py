@@ -1,12 +1,17 @@
 """Throughput of ShelfSort-v0 steps, and their overhead over the physics + rendering floor.
 
-    python benchmarks/env_step.py [--steps 30] [--seed 0]
+    python benchmarks/env_step.py [--steps 30] [--seed 0] [--profile]
 
 For N = 1, 8, 14 objects it runs a fixed mix of picks and pushes on object pixels and prints
 actions/s and, per step, the ratio of the step's wall time to its floor measured in the same
 run: the time of the step's own physics steps (pybullet.stepSimulation calls) plus the time of
 its one camera render. Everything else (IK, motor commands, heightmap, recolouring, reward,
 checks) is the overhead; the target is a ratio <= 1.3.
+
+``--profile`` splits the same actions into where their time goes, in ms per action: physics steps
+during the motion, the motion's own computation (IK, motor commands, contact checks), physics
+while the scene settles, the camera render, the heightmap (point cloud, cells, recolouring) and
+the rest (task rules, masks, bookkeeping).
 """
 
 from __future__ import annotations
@@ -69,11 +74,90 @@ def run(n: int, steps: int, seed: int) -> tuple[float, float, float]:
     return steps / wall, wall / steps, wall / floor
 
 
+PHASES = ("motion physics", "motion other", "settle physics", "render", "heightmap", "rest")
+
+
+def profile(n: int, steps: int, seed: int) -> dict[str, float]:
+    """Milliseconds per action in each of `PHASES` (same action mix as `run`)."""
+    env = ShelfSortEnv(num_objects=n, max_actions=10_000)
+    client, totals = env.client, dict.fromkeys(PHASES, 0.0)
+    where = ["motion"]
+
+    def physics() -> None:
+        t = time.perf_counter()
+        pb.stepSimulation(physicsClientId=client)
+        totals[f"{where[0]} physics"] += time.perf_counter() - t
+
+    def timed(fn, key: str | None, phase: str | None = None):
+        def call(*args, **kwargs):
+            previous = where[0]
+            if phase is not None:
+                where[0] = phase
+            t = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                if key is not None:
+                    totals[key] += time.perf_counter() - t
+                where[0] = previous
+        return call
+
+    render = Timed(env.camera.render)
+    env.camera.render = render
+    semantic = Timed(env.camera.semantic_map)
+    env.camera.semantic_map = semantic
+
+    def reset(**kwargs) -> None:
+        env.reset(**kwargs)
+        robot = env.robot
+        robot.step = lambda: (physics(), setattr(robot, "physics_steps", robot.physics_steps + 1))
+        env.world.settle = timed(env.world.settle, None, phase="settle")
+
+    rng = np.random.default_rng(seed)
+    reset(seed=seed)
+    wall, done = 0.0, 0
+    while done < steps:
+        cells = np.argwhere(env._semantic[0] >= 0)
+        if len(cells) == 0:
+            reset(seed=int(rng.integers(10**6)))
+            continue
+        r, c = cells[rng.integers(len(cells))]
+        action = env.codec.encode(env.map_names[int(rng.integers(len(env.map_names)))], int(r), int(c))
+        before = dict(totals)
+        render.total = semantic.total = 0.0
+        runner = env.primitive_runner
+        spans = {name: timed(getattr(runner, name), "motion other") for name in ("push", "pick", "place")}
+        for name, fn in spans.items():
+            setattr(runner, name, fn)
+        t = time.perf_counter()
+        _, _, terminated, truncated, _ = env.step(action)
+        wall += time.perf_counter() - t
+        for name in spans:
+            delattr(runner, name)
+        # "motion other" so far holds the whole primitive: take its physics out
+        totals["motion other"] -= totals["motion physics"] - before["motion physics"]
+        totals["render"] += render.total
+        totals["heightmap"] += semantic.total - render.total
+        done += 1
+        if terminated or truncated:
+            reset(seed=int(rng.integers(10**6)))
+    env.close()
+    totals["rest"] = wall - sum(totals[k] for k in PHASES if k != "rest")
+    return {k: 1e3 * v / steps for k, v in totals.items()}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--profile", action="store_true", help="where an action's time goes, per phase")
     args = ap.parse_args()
+    if args.profile:
+        print(f"{'N':>3} " + " ".join(f"{k:>15}" for k in PHASES) + f" {'total':>8}   (ms per action)")
+        for n in (1, 8, 14):
+            ms = profile(n, args.steps, args.seed)
+            print(f"{n:>3} " + " ".join(f"{ms[k]:>15.1f}" for k in PHASES) + f" {sum(ms.values()):>8.1f}")
+        return
     print(f"{'N':>3} {'actions/s':>10} {'ms/step':>8} {'step/floor':>11}")
     for n in (1, 8, 14):
         rate, per_step, ratio = run(n, args.steps, args.seed)
