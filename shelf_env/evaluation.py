@@ -202,12 +202,32 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
             "noops": noops, "failure": failure, "max_repeat": max_repeat}
 
 
+#: Env options an evaluation may set (the rest of the env is fixed by the protocol and the policy).
+CONDITION_KEYS = ("perception_noise", "closed_loop")
+
+
+def check_conditions(conditions: dict[str, Any] | None) -> dict[str, Any]:
+    """Validate evaluation conditions (env options, `CONDITION_KEYS`) by building them; returns a copy."""
+    conditions = dict(conditions or {})
+    unknown = sorted(set(conditions) - set(CONDITION_KEYS))
+    if unknown:
+        raise ValueError(f"unknown evaluation conditions {unknown}; known: {list(CONDITION_KEYS)}")
+    from shelf_env.perception import PerceptionNoise
+
+    PerceptionNoise.from_any(conditions.get("perception_noise"))
+    if not isinstance(conditions.get("closed_loop", False), bool):
+        raise ValueError(f"closed_loop must be true or false, got {conditions['closed_loop']!r}")
+    return conditions
+
+
 def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_set: str = "ycb",
-                  primitives: tuple[str, ...] | None = None) -> list[EpisodeRecord]:
-    """All ``runs`` episodes of one (policy, N, seed) cell."""
+                  primitives: tuple[str, ...] | None = None,
+                  conditions: dict[str, Any] | None = None) -> list[EpisodeRecord]:
+    """All ``runs`` episodes of one (policy, N, seed) cell, under ``conditions`` (env options such
+    as perception noise or the closed loop; `CONDITION_KEYS`)."""
     primitives = check_policy(policy, primitives)
     env = gym.make("ShelfSort-v0", num_objects=num_objects, object_set=object_set, primitives=primitives,
-                   max_actions=params.MAX_ACTIONS, pixel_size=policy_pixel_size(policy))
+                   max_actions=params.MAX_ACTIONS, pixel_size=policy_pixel_size(policy), **check_conditions(conditions))
     try:
         agent = make_policy(policy, env, seed=scene_seed(seed, num_objects, 10**6))  # its own stream
         return [

@@ -3,6 +3,7 @@
 import json
 import math
 import os
+import pathlib
 
 import gymnasium as gym
 import numpy as np
@@ -156,3 +157,43 @@ def test_run_episode_reports_a_looping_policy_as_a_loop():
     assert summary["failures"]["loop"] == 1 and sum(summary["failures"].values()) == 1
     (row,) = ev.summarize([record])
     assert row["loop_rate"] == 1.0 and row["timeout_rate"] == 0.0
+
+
+def test_evaluation_under_conditions_and_one_condition_set_per_folder(tmp_path, capsys):
+    grid = ["--policies", "h-d", "--ns", "1", "--runs", "2", "--seeds", "1", "--object-sets", "train",
+            "--workers", "1"]
+    noisy = tmp_path / "noisy"
+    assert evaluate_cli.main([*grid, "--out", str(noisy), "--perception-noise", '{"dropout": 1.0}']) == 0
+    assert json.loads((noisy / "conditions.json").read_text()) == {"perception_noise": {"dropout": 1.0}}
+    assert json.loads((noisy / "results.json").read_text())["config"]["conditions"] == {
+        "perception_noise": {"dropout": 1.0}}
+    records = [r for p in (noisy / "cells").iterdir() for r in ev.load_cell(p)]
+    assert all(not r.success for r in records)  # it sees nothing to pick
+    capsys.readouterr()
+    # the same folder under other conditions (or none) is refused in one line
+    assert evaluate_cli.main([*grid, "--out", str(noisy), "--closed-loop"]) == 2
+    assert "use another --out" in capsys.readouterr().err
+    assert evaluate_cli.main([*grid, "--out", str(tmp_path / "x"), "--perception-noise", '{"dropout": 2}']) == 2
+    assert "dropout must be a probability" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="unknown evaluation conditions"):
+        ev.check_conditions({"gravity": 1})
+
+
+def test_plot_conditions_draws_curves_from_two_evaluations(tmp_path, capsys):
+    import sys
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "examples"))
+    import plot_conditions
+
+    for level, ok in (("0", (True, True)), ("0.2", (True, False))):
+        records = [ev.EpisodeRecord(p, "ycb", n, 0, run, s, 4, 2, not s) for p in ("h-a", "h-d") for n in (5, 8)
+                   for run, s in enumerate(ok)]
+        ev.write_results(tmp_path / level, records, {})
+    out = tmp_path / "curves.png"
+    plot_conditions.main(["--metric", "sr", "--x", "condition", "--ns", "5", "8", "--runs",
+                          f"{tmp_path / '0'}:0", f"{tmp_path / '0.2'}:0.2", "--out", str(out)])
+    printed = capsys.readouterr().out
+    assert "N=5        h-a: 0 -> 100, 0.2 -> 50" in printed and out.stat().st_size > 5000
+    plot_conditions.main(["--metric", "fell_rate", "--x", "n", "--runs", f"{tmp_path / '0'}:off",
+                          f"{tmp_path / '0.2'}:on", "--out", str(tmp_path / "falls.png")])
+    assert "h-d (on): N=5: 0.5, N=8: 0.5" in capsys.readouterr().out

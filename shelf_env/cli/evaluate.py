@@ -22,6 +22,7 @@ history-free (`shelf_env.env`), so a cell's records depend only on (policy, N, s
 from __future__ import annotations
 
 import argparse
+import json
 import multiprocessing as mp
 import os
 import pathlib
@@ -33,6 +34,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from sb3_pixeldqn.files import write_json_atomically
 from shelf_env import evaluation as ev
 
 #: A cell: (policy, N, seed, object set).
@@ -51,6 +53,17 @@ def parse_ns(text: str) -> list[int]:
     return out
 
 
+def json_object(text: str) -> dict:
+    """A JSON object from the command line."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise argparse.ArgumentTypeError(f"not JSON: {err}") from err
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object like '{{\"dropout\": 0.1}}', got {text}")
+    return value
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="shelf-evaluate", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -62,6 +75,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--out", type=pathlib.Path, required=True)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--summarize-only", action="store_true", help="only aggregate the cells already on disk")
+    p.add_argument("--perception-noise", type=json_object, default=None, metavar="JSON",
+                   help='evaluate under perception noise, e.g. \'{"dropout": 0.1, "class_flip": 0.05}\'')
+    p.add_argument("--closed-loop", action="store_true", help="evaluate with closed-loop primitives")
     p.add_argument("--backend", choices=["local", "ray"], default="local",
                    help="local worker processes (default) or Ray tasks (the ray extra)")
     p.add_argument("--ray-address", default=None,
@@ -70,24 +86,26 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
-def _run_cell(policy: str, n: int, seed: int, runs: int, object_set: str, path: str, parent_pid: int) -> bool:
+def _run_cell(policy: str, n: int, seed: int, runs: int, object_set: str, path: str, parent_pid: int,
+              conditions: dict | None = None) -> bool:
     """Run one cell and write it; True if written. A worker whose parent died meanwhile (the
     evaluation was killed, maybe to change the code) discards its cell instead of writing it."""
     import torch
 
     torch.set_num_threads(1)
-    records = ev.evaluate_cell(policy, n, seed, runs, object_set)
+    records = ev.evaluate_cell(policy, n, seed, runs, object_set, conditions=conditions)
     if os.getppid() != parent_pid:
         return False
     ev.save_cell(pathlib.Path(path), records)
     return True
 
 
-def run_local(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, workers: int) -> None:
+def run_local(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, workers: int,
+              conditions: dict | None = None) -> None:
     """Every cell of ``todo`` in a worker process; each worker writes its cell when done."""
     ctx = mp.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = [pool.submit(_run_cell, p, n, s, runs, o, str(paths[(p, n, s, o)]), os.getpid())
+        futures = [pool.submit(_run_cell, p, n, s, runs, o, str(paths[(p, n, s, o)]), os.getpid(), conditions)
                    for p, n, s, o in todo]
         for future in tqdm(as_completed(futures), total=len(futures), desc="cells", unit="cell"):
             future.result()
@@ -108,7 +126,7 @@ def check_ray_address(address: str | None, timeout: float = 5.0) -> None:
 
 
 def _ray_cell(policy: str, checkpoint: bytes | None, n: int, seed: int, runs: int,
-              object_set: str) -> list[ev.EpisodeRecord]:
+              object_set: str, conditions: dict | None = None) -> list[ev.EpisodeRecord]:
     """One cell on a Ray worker. A checkpoint travels as bytes (a cluster's nodes need not share the
     driver's disk) and is written under its own file name, so the records carry the same label."""
     import tempfile
@@ -117,14 +135,15 @@ def _ray_cell(policy: str, checkpoint: bytes | None, n: int, seed: int, runs: in
 
     torch.set_num_threads(1)
     if checkpoint is None:
-        return ev.evaluate_cell(policy, n, seed, runs, object_set)
+        return ev.evaluate_cell(policy, n, seed, runs, object_set, conditions=conditions)
     with tempfile.TemporaryDirectory() as tmp:
         local = pathlib.Path(tmp) / pathlib.Path(policy).name
         local.write_bytes(checkpoint)
-        return ev.evaluate_cell(str(local), n, seed, runs, object_set)
+        return ev.evaluate_cell(str(local), n, seed, runs, object_set, conditions=conditions)
 
 
-def run_ray(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, workers: int, address: str | None) -> None:
+def run_ray(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, workers: int, address: str | None,
+            conditions: dict | None = None) -> None:
     """Every cell of ``todo`` as a Ray task (one CPU each); the driver writes each cell as it returns."""
     import ray
 
@@ -138,12 +157,25 @@ def run_ray(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, workers:
     cell = ray.remote(num_cpus=1)(_ray_cell)
     blobs: dict[str, Any] = {p: ray.put(pathlib.Path(p).read_bytes())
                              for p in {job[0] for job in todo} if p not in ev.NAMED_POLICIES}
-    pending = {cell.remote(p, blobs.get(p), n, s, runs, o): (p, n, s, o) for p, n, s, o in todo}
+    pending = {cell.remote(p, blobs.get(p), n, s, runs, o, conditions): (p, n, s, o) for p, n, s, o in todo}
     with tqdm(total=len(pending), desc="cells (ray)", unit="cell") as bar:
         while pending:
             (ref,), _ = ray.wait(list(pending), num_returns=1)
             ev.save_cell(paths[pending.pop(ref)], ray.get(ref))
             bar.update()
+
+
+def check_out_conditions(out: pathlib.Path, conditions: dict) -> None:
+    """One output folder holds cells of one set of conditions: a folder made under other
+    conditions is refused (its cells would be mixed with these)."""
+    path = out / "conditions.json"
+    if path.exists():
+        before = json.loads(path.read_text())
+        if before != conditions:
+            raise ValueError(f"{out} holds cells evaluated under conditions {before}, not {conditions}: "
+                             "use another --out")
+    elif (out / "cells").is_dir() and any((out / "cells").iterdir()) and conditions:
+        raise ValueError(f"{out} holds cells evaluated without conditions: use another --out for {conditions}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -162,6 +194,10 @@ def main(argv: list[str] | None = None) -> int:
             check_ray_address(args.ray_address)
         elif args.ray_address is not None:
             raise ValueError("--ray-address needs --backend ray")
+        conditions = ev.check_conditions(
+            {**({"perception_noise": args.perception_noise} if args.perception_noise is not None else {}),
+             **({"closed_loop": True} if args.closed_loop else {})})
+        check_out_conditions(args.out, conditions)
     except ValueError as err:
         print(f"shelf-evaluate: error: {err}", file=sys.stderr)
         return 2
@@ -172,23 +208,25 @@ def main(argv: list[str] | None = None) -> int:
     paths = {job: ev.cell_path(args.out, job[0], job[3], job[1], job[2], args.runs) for job in jobs}
     todo = [job for job in jobs if not paths[job].exists()]
     print(f"{len(jobs)} cells, {len(jobs) - len(todo)} already on disk, {len(todo)} to run", flush=True)
+    if todo and not args.summarize_only and conditions and not (args.out / "conditions.json").exists():
+        write_json_atomically(args.out / "conditions.json", conditions)
     if todo and not args.summarize_only:
         start = time.perf_counter()
         if args.backend == "ray":
             try:
-                run_ray(todo, paths, args.runs, args.workers, args.ray_address)
+                run_ray(todo, paths, args.runs, args.workers, args.ray_address, conditions)
             except ValueError as err:
                 print(f"shelf-evaluate: error: {err}", file=sys.stderr)
                 return 2
         else:
-            run_local(todo, paths, args.runs, args.workers)
+            run_local(todo, paths, args.runs, args.workers, conditions)
         print(f"{len(todo)} cells in {time.perf_counter() - start:.1f} s ({args.backend} backend)", flush=True)
     done = [job for job in jobs if paths[job].exists()]
     if not done:
         print("no finished cells yet")
         return 0
     records = [r for job in done for r in ev.load_cell(paths[job])]
-    config = {"policies": args.policies, "ns": ns, "runs": args.runs, "seeds": args.seeds,
+    config = {"policies": args.policies, "ns": ns, "runs": args.runs, "seeds": args.seeds, "conditions": conditions,
               "object_sets": args.object_sets, "complete": len(done) == len(jobs),
               "command": " ".join(["shelf-evaluate", *(sys.argv[1:] if argv is None else argv)])}
     rows = ev.write_results(args.out, records, config)
