@@ -249,7 +249,8 @@ class DragWatch:
     and leaves a clean pick alone, but in clutter it over-triggers. H-d on 10 YCB scenes at N = 8
     (2026-11-23): open loop 4/10 sorted, 6 falls, 50 actions; closed loop 3/10, 6 falls, 37
     interventions in 99 actions (sensor peaks 1-22 N: the carried object touching its neighbours).
-    Of the 6 open-loop falls, 3 were neighbours leaving through the opening during the retreat.
+    Of the 6 open-loop falls, 5 were neighbours leaving the cabinet during the pick's retreat (the
+    case this watch is for), 1 an object sliding out after a place.
     The thresholds and the reaction still have to be measured against fall rates (issue 13).
     """
 
