@@ -381,18 +381,7 @@ class Primitives:
         here = self._commanded_tcp()
         hang = here[2] - pb.getAABB(obj, physicsClientId=r.client)[0][2]
         low = np.array([here[0], here[1], min(max(hang + m.release_gap, 0.0), here[2])])
-
-        def landed() -> bool:
-            return any(p[2] != r.uid for p in pb.getContactPoints(bodyA=obj, physicsClientId=r.client))
-
-        r.move_linear(here, low, m.lift_speed, stop=landed)
-        r.release()
-        r.hold_still(12)
-        here = self._commanded_tcp()
-        up = np.array([here[0], here[1], min(here[2] + m.lift, _z_max(m))])
-        r.move_linear(here, up, m.vertical_speed)
-        r.move_linear(up, np.array([min(m.outside_x, up[0]), up[1], up[2]]), m.approach_speed)
-        r.go_home()
+        self._lower_and_release(obj, here, low)
 
     def place(self, grasp: Grasp, x: float, y: float) -> None:
         """Carry the held object of ``grasp`` in front of (x, y), in at carry height, lower it
@@ -403,18 +392,25 @@ class Primitives:
         r.teleport(np.array([out_x, y, z_carry]))
         r.move_linear(np.array([out_x, y, z_carry]), np.array([x, y, z_carry]), m.approach_speed)
         z_release = min(max(hang + m.release_gap, 0.0), z_carry)
+        self._lower_and_release(obj, np.array([x, y, z_carry]), np.array([x, y, z_release]))
+
+    def _lower_and_release(self, obj: int, start: np.ndarray, low: np.ndarray) -> None:
+        """Lower the held ``obj`` from ``start`` towards ``low`` until it touches anything but the
+        tool, release it, lift the cup clear and leave the cabinet (in front of the opening) for home."""
+        r, m = self.robot, self.robot.motion
 
         def landed() -> bool:  # the held object touches anything but the tool
             pts = pb.getContactPoints(bodyA=obj, physicsClientId=r.client)
             return any(p[2] != r.uid for p in pts)
 
-        r.move_linear(np.array([x, y, z_carry]), np.array([x, y, z_release]), m.lift_speed, stop=landed)
+        x, y = float(low[0]), float(low[1])
+        r.move_linear(start, low, m.lift_speed, stop=landed)
         r.release()
         r.hold_still(12)
         here = self._commanded_tcp()
         r.move_linear(here, np.array([x, y, min(here[2] + m.lift, _z_max(m))]), m.vertical_speed)
         here = self._commanded_tcp()
-        r.move_linear(here, np.array([m.outside_x, y, here[2]]), m.approach_speed)
+        r.move_linear(here, np.array([min(m.outside_x, x), y, here[2]]), m.approach_speed)
         r.go_home()
 
     def _commanded_tcp(self) -> np.ndarray:
