@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,6 +33,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_pixeldqn.buffers import NOOP_MODES, RELABEL_MODES
 from sb3_pixeldqn.callbacks import GATES
 from shelf_env import params
+from shelf_env.actions import PRIMITIVES, ActionCodec
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
 from shelf_env.objects import OBJECT_SETS
 from shelf_env.symmetry import MirrorWidth, PermuteClasses
@@ -107,8 +109,8 @@ class TrainConfig:
             if getattr(self, key) not in allowed:
                 raise ValueError(f"TrainConfig.{key} must be one of {list(allowed)}, got {getattr(self, key)!r}")
         names = self.primitives
-        if not names or len(set(names)) != len(names) or not set(names) <= {"pick", "push"}:
-            raise ValueError(f"TrainConfig.primitives must be distinct names from ('pick', 'push'), got {names}")
+        if not names or len(set(names)) != len(names) or not set(names) <= set(PRIMITIVES):
+            raise ValueError(f"TrainConfig.primitives must be distinct names from {PRIMITIVES}, got {names}")
         unknown = [a for a in self.augment if a not in AUGMENTATIONS]
         if unknown:
             raise ValueError(f"unknown augmentations {unknown}; known: {list(AUGMENTATIONS)}")
@@ -171,9 +173,32 @@ def make_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any)
                     primitives=config.primitives, pixel_size=config.pixel_size, **kwargs)
 
 
-def augmentations(config: TrainConfig, env: gym.Env) -> list[Any]:
-    """The transforms named by ``config.augment``, for ``env``'s layout."""
-    return [MirrorWidth.for_env(env) if name == "mirror" else PermuteClasses() for name in config.augment]
+def env_codec(env: gym.Env | VecEnv) -> ActionCodec:
+    """The action codec of a ShelfSort-v0 env or of the first env of a VecEnv of them."""
+    return env.get_attr("codec")[0] if isinstance(env, VecEnv) else ActionCodec.of(env)
+
+
+def augmentations(config: TrainConfig, codec: ActionCodec) -> list[Any]:
+    """The transforms named by ``config.augment``, for the layout of ``codec``."""
+    return [MirrorWidth(codec) if name == "mirror" else PermuteClasses() for name in config.augment]
+
+
+def collect_demonstrations(model: Any, config: TrainConfig, demos: Any, set_num_objects: Callable[[int], Any],
+                           log: Callable[[str], None] = print) -> float:
+    """Fill ``model``'s kept demonstration store with ``config.demo_steps`` steps of ``demos``, split
+    evenly over ``config.demo_objects`` (``set_num_objects`` switches the training envs' N before
+    each part); returns the seconds it took."""
+    start = time.monotonic()
+    per_n = max(1, config.demo_steps // len(config.demo_objects))
+    capacity = 2 * per_n * len(config.demo_objects)
+    for n in config.demo_objects:
+        set_num_objects(n)
+        stats = model.collect_demonstrations(demos, per_n, capacity=capacity)
+        log(f"demonstrations: {config.demo_policy} at N = {n}, {stats['steps']} steps, {stats['episodes']} "
+            f"episodes, {stats['successes']} sorted")
+    seconds = time.monotonic() - start
+    log(f"demonstrations took {seconds:.0f} s")
+    return seconds
 
 
 def make_model(config: TrainConfig, env: gym.Env | VecEnv, seed: int = 0, tensorboard_log: str | None = None,
@@ -181,7 +206,6 @@ def make_model(config: TrainConfig, env: gym.Env | VecEnv, seed: int = 0, tensor
     """A fresh `PixelDoubleDQN` for ``config`` on ``env``."""
     from sb3_pixeldqn import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, PixelDoubleDQN
 
-    probe = env if not isinstance(env, VecEnv) else None
     maps = PICK_AND_PUSH_MAPS if "push" in config.primitives else PICK_ONLY_MAPS
     return PixelDoubleDQN(
         "FCNPolicy",
@@ -203,7 +227,7 @@ def make_model(config: TrainConfig, env: gym.Env | VecEnv, seed: int = 0, tensor
         demo_fraction=config.demo_fraction,
         margin=config.margin,
         margin_weight=config.margin_weight,
-        augment=augmentations(config, probe or make_env(config)),
+        augment=augmentations(config, env_codec(env)),
         policy_kwargs=dict(maps=maps, widths=tuple(config.widths)),
         tensorboard_log=tensorboard_log,
         seed=seed,
@@ -215,9 +239,7 @@ def demo_policy(config: TrainConfig, env: gym.Env) -> Any:
     """The demonstration policy of ``config`` acting on ``env``'s layout (None if it has none)."""
     if config.demo_policy is None:
         return None
-    if config.demo_policy not in DEMO_POLICIES:
-        raise ValueError(f"unknown demo_policy {config.demo_policy!r}; known: {sorted(DEMO_POLICIES)}")
-    return DEMO_POLICIES[config.demo_policy](env)
+    return DEMO_POLICIES[config.demo_policy](env)  # TrainConfig.check allows only known names
 
 
 def eval_action_limit(config: TrainConfig) -> int | Callable[[int], int] | None:

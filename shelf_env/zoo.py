@@ -22,15 +22,22 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 import sys
-import time
 from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from sb3_pixeldqn import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, HindsightRelabelReplayBuffer, PixelDoubleDQN
 from shelf_env.actions import ActionCodec
-from shelf_env.symmetry import MirrorWidth, PermuteClasses
-from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_callbacks, make_env
+from shelf_env.training import (
+    PRESETS,
+    TrainConfig,
+    augmentations,
+    collect_demonstrations,
+    demo_policy,
+    env_codec,
+    make_callbacks,
+    make_env,
+)
 
 ALGO = "pixel_double_dqn"
 ENV_ID = "ShelfSort-v0"
@@ -138,23 +145,15 @@ class RecipeCallback(BaseCallback):
         model = self.model
         assert isinstance(model, PixelDoubleDQN), "RecipeCallback trains a PixelDoubleDQN"
         config = self._config()
-        codec = self.training_env.get_attr("codec")[0]
-        model.augment = [MirrorWidth(codec) if name == "mirror" else PermuteClasses() for name in config.augment]
+        model.augment = augmentations(config, env_codec(self.training_env))
         buffer = model.replay_buffer
         assert isinstance(buffer, HindsightRelabelReplayBuffer)
         if config.demo_policy is not None and buffer.demonstrations is None and config.demo_steps > 0:
             probe = make_env(config)  # the heuristics read only the layout of the env they are built on
             demos = demo_policy(config, probe)
             probe.close()
-            start = time.monotonic()
-            per_n = max(1, config.demo_steps // len(config.demo_objects))
-            for n in config.demo_objects:
-                self.training_env.env_method("set_num_objects", n)
-                stats = model.collect_demonstrations(demos, per_n, capacity=2 * per_n * len(config.demo_objects))
-                if self.verbose:
-                    print(f"demonstrations: {config.demo_policy} at N = {n}: {stats}", flush=True)
-            if self.verbose:
-                print(f"demonstrations took {time.monotonic() - start:.0f} s", flush=True)
+            collect_demonstrations(model, config, demos, lambda n: self.training_env.env_method("set_num_objects", n),
+                                   log=lambda line: print(line, flush=True) if self.verbose else None)
         self.children = CallbackList(make_callbacks(config, seed=model.seed or 0, verbose=self.verbose))
         self.children.init_callback(model)
         self.children.on_training_start(self.locals, self.globals)

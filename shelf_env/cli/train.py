@@ -37,7 +37,15 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import HindsightRelabelReplayBuffer, PixelDoubleDQN
 from sb3_pixeldqn.files import copy_atomically, write_json_atomically, write_text_atomically
-from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_callbacks, make_env, make_model
+from shelf_env.training import (
+    PRESETS,
+    TrainConfig,
+    collect_demonstrations,
+    demo_policy,
+    make_callbacks,
+    make_env,
+    make_model,
+)
 
 EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
 
@@ -263,18 +271,10 @@ def train(args: argparse.Namespace) -> None:
     buffer = model.replay_buffer
     assert isinstance(buffer, HindsightRelabelReplayBuffer)
     if demos is not None and buffer.demonstrations is None:
-        start = time.monotonic()
-        per_n = max(1, config.demo_steps // len(config.demo_objects))
-        capacity = 2 * per_n * len(config.demo_objects)
-        for n in config.demo_objects:
-            env.get_wrapper_attr("set_num_objects")(n)
-            stats = model.collect_demonstrations(demos, per_n, capacity=capacity)
-            print(f"demonstrations: {config.demo_policy} at N = {n}, {stats['steps']} steps, {stats['episodes']} "
-                  f"episodes, {stats['successes']} sorted", flush=True)
-        seconds = time.monotonic() - start
+        seconds = collect_demonstrations(model, config, demos, env.get_wrapper_attr("set_num_objects"),
+                                         log=lambda line: print(line, flush=True))
         progress["wall_seconds"] += seconds
         progress["demo_seconds"] = progress.get("demo_seconds", 0.0) + seconds
-        print(f"demonstrations took {seconds:.0f} s", flush=True)
     truncate_csv(args.out / "episodes.csv", progress["episodes"])
     budget = BudgetAndCheckpoint(args.out, progress, args.hours, args.max_steps, args.checkpoint_minutes, args.mirror)
     if budget.wall_seconds() >= budget.budget_seconds or model.num_timesteps >= args.max_steps:
