@@ -253,6 +253,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
         super().set_env(env, force_reset)
         self._resolve_masks()
+
     def _epsilon(self, stage_timesteps: int) -> float:
         progress = min(1.0, stage_timesteps / self.exploration_timesteps)
         return self.exploration_initial_eps + progress * (self.exploration_final_eps - self.exploration_initial_eps)
@@ -374,7 +375,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
         losses, margin_losses = [], []
-        use_masks = self.masked is not False
+        use_masks = self.acts_masked
         buffer = self.replay_buffer
         assert isinstance(buffer, HindsightRelabelReplayBuffer)  # _setup_model checks the class
         for _ in range(gradient_steps):

@@ -35,8 +35,8 @@ terminated True. The action is unchanged.
 objects or parts, class flips and depth noise on every capture, seeded per episode; the policy's
 observation, the masks and the env's own planning see the noisy map, rewards the true state.
 
-``closed_loop=True`` (experimental, off by default): the pick's lift and retreat watch the cup's
-force sensor and put the carried object down when it drags a neighbour (`shelf_env.robot.DragWatch`);
+``closed_loop=True`` (experimental, off by default): the pick's retreat watches the cup's force
+sensor and puts the carried object down when it drags a neighbour (`shelf_env.robot.DragWatch`);
 ``info["interventions"]`` lists what it did.
 
 ``sleeping=True`` (default) lets objects at rest sleep in Bullet between contacts, which makes
@@ -148,7 +148,7 @@ class ShelfSortEnv(gym.Env):
         self.codec = ActionCodec(tuple(self.map_names), self.camera.rows, self.camera.cols, pixel_size)
         self.rows, self.cols = self.codec.rows, self.codec.cols
         self.observation_space = gym.spaces.Box(0, 255, (4, self.rows, self.cols), dtype=np.uint8)
-        self.action_space = gym.spaces.Discrete(len(self.map_names) * self.rows * self.cols)
+        self.action_space = gym.spaces.Discrete(self.codec.n)
         self._regions_mask = np.zeros((params.NUM_CLASSES, self.rows, self.cols), dtype=bool)
         self._semantic: tuple[np.ndarray, np.ndarray] | None = None
         self._obs: np.ndarray | None = None
@@ -383,8 +383,7 @@ class ShelfSortEnv(gym.Env):
         into a side wall and left outside the cabinet.
         """
         obj = next(o for o in self.world.objects if o.uid == uid)
-        assert self._semantic is not None  # a primitive runs only after reset has observed the scene
-        cell_uid, _ = self._semantic
+        cell_uid, _ = self._observed_semantic()
         aabb_min, aabb_max = (np.asarray(v) for v in pb.getAABB(uid, physicsClientId=self.client))
         footprint = (aabb_max[0] - aabb_min[0], aabb_max[1] - aabb_min[1])
         centre_x, centre_y = place_position(cell_uid, self._class_of_uid(), self._regions_mask[obj.cls],

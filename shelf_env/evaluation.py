@@ -279,10 +279,11 @@ def summarize(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
             row[f"{key}_mean"] = float(finite.mean()) if finite.size else math.nan
             row[f"{key}_std"] = float(finite.std()) if finite.size else math.nan
         everything = [r for rs in by_seed.values() for r in rs]
-        row["fell_rate"] = float(np.mean([r.fell for r in everything]))
+        summary = episode_summary(everything)
+        row["fell_rate"] = summary["fell"] / len(everything)
         for kind in FAILURES[1:]:  # shares of all episodes; cells from before `failure` existed count none
-            row[f"{kind}_rate"] = float(np.mean([r.failure == kind for r in everything]))
-        row["noop_share"] = episode_summary([r for rs in by_seed.values() for r in rs])["noop_share"]
+            row[f"{kind}_rate"] = summary["failures"][kind] / len(everything)
+        row["noop_share"] = summary["noop_share"]
         rows.append(row)
     return rows
 

@@ -44,10 +44,8 @@ class MirrorWidth:
         if not 0.0 <= p <= 1.0:
             raise ValueError(f"p must lie in [0, 1], got {p}")
         self.codec = codec
-        self.map_names = codec.map_names
-        self.rows, self.cols = codec.rows, codec.cols
         self.p = float(p)
-        self.map_perm = np.array([self.map_names.index(MIRROR_MAP[m]) for m in self.map_names])
+        self.map_perm = np.array([codec.map_index(MIRROR_MAP[m]) for m in codec.map_names])
 
     @classmethod
     def for_env(cls, env: gym.Env, p: float = 0.5) -> MirrorWidth:
@@ -65,7 +63,7 @@ class MirrorWidth:
         return self.codec.mirror(int(action))
 
     def mask(self, mask: np.ndarray) -> np.ndarray:
-        maps = np.asarray(mask).reshape(len(self.map_names), self.rows, self.cols)
+        maps = np.asarray(mask).reshape(len(self.codec.map_names), self.codec.rows, self.codec.cols)
         return np.ascontiguousarray(maps[self.map_perm][..., ::-1]).reshape(-1)
 
     def __call__(self, obs: np.ndarray, action: int, next_obs: np.ndarray, next_mask: np.ndarray,
