@@ -12,6 +12,12 @@ checks) is the overhead; the target is a ratio <= 1.3.
 during the motion, the motion's own computation (IK, motor commands, contact checks), physics
 while the scene settles, the camera render, the heightmap (point cloud, cells, recolouring) and
 the rest (task rules, masks, bookkeeping).
+
+``--compare [OLD NEW]`` (default ``reference fast``, see `shelf_env.world.PHYSICS`; a setting may
+also be given as ITERATIONS:RESIDUAL:SKIP, e.g. 20:1e-5:1) times one action under two physics
+settings in one run: for each of ``--scenes`` scenes per N, random actions on object pixels are
+drawn and run under OLD, then the same action indices are replayed under NEW from the same scene,
+scene by scene, so that both see the same machine load. It prints ms per action for both and the ratio old / new.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import numpy as np
 import pybullet as pb
 
 from shelf_env.env import ShelfSortEnv
+from shelf_env.world import Physics
 
 
 class Timed:
@@ -146,12 +153,57 @@ def profile(n: int, steps: int, seed: int) -> dict[str, float]:
     return {k: 1e3 * v / steps for k, v in totals.items()}
 
 
+def compare(n: int, scenes: int, actions: int, seed: int, old: Physics, new: Physics) -> tuple[float, float, int]:
+    """(ms per action under ``old``, under ``new``, actions timed): same scenes, same action indices."""
+    envs = [ShelfSortEnv(num_objects=n, max_actions=10_000, physics=p) for p in (old, new)]
+    rng = np.random.default_rng(seed)
+    wall, count = [0.0, 0.0], [0, 0]
+    for scene in range(scenes):
+        scene_seed = seed * 1000 + scene
+        played: list[int] = []
+        for k, env in enumerate(envs):
+            env.reset(seed=scene_seed)
+            for i in range(actions):
+                if k == 0:  # draw on OLD's observation; NEW replays the same indices
+                    cells = np.argwhere(env._semantic[0] >= 0)
+                    if len(cells) == 0:
+                        break
+                    r, c = cells[rng.integers(len(cells))]
+                    played.append(env.codec.encode(env.map_names[int(rng.integers(len(env.map_names)))],
+                                                   int(r), int(c)))
+                elif i >= len(played):
+                    break
+                t = time.perf_counter()
+                _, _, terminated, truncated, _ = env.step(played[i])
+                wall[k] += time.perf_counter() - t
+                count[k] += 1
+                if terminated or truncated:
+                    break
+    for env in envs:
+        env.close()
+    return 1e3 * wall[0] / max(count[0], 1), 1e3 * wall[1] / max(count[1], 1), count[1]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--profile", action="store_true", help="where an action's time goes, per phase")
+    ap.add_argument("--compare", nargs="*", type=Physics.parse, metavar="PHYSICS",
+                    help="old vs new physics (default: reference fast), ms per action and ratio")
+    ap.add_argument("--scenes", type=int, default=6, help="scenes per N for --compare")
+    ap.add_argument("--actions", type=int, default=8, help="actions per scene for --compare")
     args = ap.parse_args()
+    if args.compare is not None:
+        if len(args.compare) not in (0, 2):
+            ap.error(f"--compare takes no setting or two (OLD NEW), got {len(args.compare)}")
+        old, new = args.compare or [Physics.named("reference"), Physics.named("fast")]
+        print(f"old: {old}\nnew: {new}")
+        print(f"{'N':>3} {'old ms':>8} {'new ms':>8} {'old/new':>8} {'actions':>8}")
+        for n in (1, 8, 14):
+            ms_old, ms_new, count = compare(n, args.scenes, args.actions, args.seed, old, new)
+            print(f"{n:>3} {ms_old:>8.0f} {ms_new:>8.0f} {ms_old / ms_new:>8.2f} {count:>8}", flush=True)
+        return
     if args.profile:
         print(f"{'N':>3} " + " ".join(f"{k:>15}" for k in PHASES) + f" {'total':>8}   (ms per action)")
         for n in (1, 8, 14):

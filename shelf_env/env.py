@@ -42,6 +42,11 @@ sensor and puts the carried object down when it drags a neighbour (`shelf_env.ro
 ``sleeping=True`` (default) lets objects at rest sleep in Bullet between contacts, which makes
 actions cheaper with many objects (`benchmarks/sleeping.py`); ``sleeping=False`` simulates every object at every physics
 step (see `shelf_env.world`).
+
+``physics="fast"`` (default; `shelf_env.world.Physics`) caps Bullet's constraint solver at 20
+sweeps with an early exit and does not simulate the arm's motion where nothing can happen;
+``physics="reference"`` simulates every motion with PyBullet's default solver, the physics of
+every result before 2026-11-23. ``benchmarks/env_step.py --compare`` measures both.
 """
 
 from __future__ import annotations
@@ -60,7 +65,7 @@ from shelf_env.objects import OBJECT_SETS, ObjectSpec, sample_specs
 from shelf_env.perception import PerceptionNoise
 from shelf_env.placement import place_position
 from shelf_env.robot import DragWatch, Primitives, Robot
-from shelf_env.world import Region, World, sample_regions
+from shelf_env.world import Physics, Region, World, sample_regions
 
 SPAWN_TRIES = 100
 __all__ = ["PRIMITIVES", "ShelfSortEnv", "map_names"]
@@ -84,6 +89,7 @@ class ShelfSortEnv(gym.Env):
     max_actions: int
     render_mode: str | None
     sleeping: bool
+    physics: Physics
     world: World
     robot: Robot
     primitive_runner: Primitives
@@ -111,6 +117,7 @@ class ShelfSortEnv(gym.Env):
         sleeping: bool = True,
         perception_noise: PerceptionNoise | dict | None = None,
         closed_loop: bool = False,
+        physics: str | Physics = "fast",
     ) -> None:
         if object_set not in OBJECT_SETS:
             raise ValueError(f"unknown object_set {object_set!r}; expected one of {OBJECT_SETS}")
@@ -140,6 +147,8 @@ class ShelfSortEnv(gym.Env):
         self.render_mode = render_mode
 
         self.sleeping = bool(sleeping)
+        #: How much is simulated (`shelf_env.world.Physics`): "fast" (default) or "reference".
+        self.physics = Physics.named(physics)
         self.client = pb.connect(pb.DIRECT)
         self._build_world()
         self.camera = HeightmapCamera(self.client, camera, pixel_size, hidden_bodies=self.world.decorative,
@@ -196,8 +205,8 @@ class ShelfSortEnv(gym.Env):
         if self.client is None:
             raise RuntimeError("this ShelfSortEnv is closed")
         pb.resetSimulation(physicsClientId=self.client)
-        self.world = World(self.client, sleeping=self.sleeping)
-        self.robot = Robot(self.client)
+        self.world = World(self.client, sleeping=self.sleeping, physics=self.physics)
+        self.robot = Robot(self.client, skip_free_motion=self.physics.skip_free_motion)
         self.primitive_runner = Primitives(self.robot, watch=self.drag_watch)
         camera = getattr(self, "camera", None)
         if camera is not None:  # same bodies in the same order: same ids, but say so rather than assume

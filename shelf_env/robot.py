@@ -8,7 +8,10 @@ objects. Motions *outside* the cabinet (home <-> the pre-approach pose in front 
 and the transfer between the pick and the place pre-approach poses) are teleported: they happen
 in free space in front of the cabinet, where nothing can be touched, so skipping them changes
 nothing inside and saves ~60 % of the physics steps. The arm is at home (out of the camera's
-view) whenever the camera captures.
+view) whenever the camera captures. With ``skip_free_motion`` (``physics="fast"``, the env's
+default) the same reasoning extends inside the cabinet: the parts of a motion where the arm and
+what it holds stay clear of everything, and nothing else moves, are not simulated either
+(`Robot.move_linear`).
 
 Suction (as in Ravens): when the cup touches an object at the end of its descent, a fixed
 constraint is created between cup and object; releasing removes it.
@@ -38,6 +41,16 @@ DH_BASE_IN_URDF = np.diag([-1.0, -1.0, 1.0, 1.0])
 ARM_JOINTS = 6
 OUTSIDE_X_MIN = -0.10  # furthest TCP retreat in front of the opening (reach limit)
 JOINT_FORCES = np.array([150.0, 150.0, 150.0, 28.0, 28.0, 28.0]) * 2.0
+# Free motion (`Robot.move_linear` with ``skip_free_motion``): the arm's path is sampled every
+# FREE_SAMPLE_SPACING and counts as free where every movable body is farther than FREE_MARGIN from
+# the arm and what it holds (one within FREE_MARGIN - FREE_SAMPLE_SPACING / 2 of the swept arm is
+# always found), and every fixed body (cabinet, ground) farther than STATIC_MARGIN: the tool
+# travels 5 mm under the ceiling by design, and the cabinet's faces are planes, along which a
+# straight path's distance is closest at a sampled end.
+FREE_SAMPLE_SPACING = 0.005
+FREE_MARGIN = 0.01
+STATIC_MARGIN = 0.002
+FREE_RECHECK_STEPS = 24  # on an exit, how often (physics steps) to look again whether the rest is free
 
 
 @dataclass
@@ -60,8 +73,12 @@ class MotionConfig:
 class Robot:
     """UR5 + blade + suction cup in a PyBullet client."""
 
-    def __init__(self, client: int, base_position=(-0.75, 0.0, 0.0), motion: MotionConfig | None = None):
+    def __init__(self, client: int, base_position=(-0.75, 0.0, 0.0), motion: MotionConfig | None = None,
+                 skip_free_motion: bool = False):
         self.client = client
+        #: Do not simulate the free parts of motions (see `move_linear`); `skipped_steps` counts them.
+        self.skip_free_motion = bool(skip_free_motion)
+        self.skipped_steps = 0
         self.motion = motion or MotionConfig()
         urdf = str(resources.files("shelf_env") / "assets" / "ur5_blade.urdf")
         self.uid = pb.loadURDF(urdf, basePosition=base_position, useFixedBase=True,
@@ -161,12 +178,23 @@ class Robot:
         self._set_joints(self.q_home)
 
     def move_linear(self, start: np.ndarray, end: np.ndarray, speed: float,
-                    stop: Callable[[], bool] | None = None, check_every: int = 2) -> bool:
+                    stop: Callable[[], bool] | None = None, check_every: int = 2,
+                    skip_free: bool = True) -> bool:
         """Move the TCP along the segment start -> end at ``speed``; True if ``stop`` fired.
 
         IK at waypoints ``waypoint_spacing`` apart; joint targets interpolated per physics step
         with feed-forward velocities. The step count is fixed by the segment length, so a motion
         can never run away.
+
+        Free motion. With ``skip_free_motion`` (and ``skip_free``) the parts of the path where
+        nothing can happen are not simulated: while every other body is still and no part of the
+        arm or of the object it holds comes within ``FREE_MARGIN`` of another body, the arm (and
+        what it holds) is put on the path, at that step's joint angles and feed-forward velocities,
+        instead of being driven there. Skipped are the free start of a motion (up to the last path
+        sample before anything comes near) and, without a ``stop`` rule, its free rest once the
+        world is still again (checked then, against where everything is then). Everything near a
+        contact is simulated as before. A ``stop`` rule must therefore only fire on contact (the
+        pick's touch, the place's landing); pass ``skip_free=False`` for any other rule.
         """
         start, end = np.asarray(start, float), np.asarray(end, float)
         length = float(np.linalg.norm(end - start))
@@ -177,13 +205,119 @@ class Robot:
         s_step = np.arange(1, n_steps + 1) / n_steps
         q_path = np.stack([np.interp(s_step, s_way, q_way[:, j]) for j in range(ARM_JOINTS)], axis=1)
         dq_path = np.gradient(q_path, params.TIME_STEP, axis=0) if n_steps > 1 else np.zeros_like(q_path)
-        for i in range(n_steps):
+        tcp_velocity = (end - start) / max(length, 1e-12) * speed if n_steps > 1 else np.zeros(3)
+        first, last = 0, n_steps  # simulate from step `first`; from step `last` on, skip once free
+        samples = np.zeros(0, dtype=int)
+        if self.skip_free_motion and skip_free:
+            stride = max(1, int(FREE_SAMPLE_SPACING / (speed * params.TIME_STEP)))
+            samples = np.unique(np.r_[np.arange(0, n_steps, stride), n_steps - 1])
+            hits = np.flatnonzero(self._near(q_path[samples]))
+            if self._world_still():
+                if len(hits) == 0:
+                    if stop is None:
+                        self._put_on_path(q_path[-1], dq_path[-1], tcp_velocity)
+                        self.skipped_steps += n_steps
+                        return False
+                    first = int(samples[-1])  # simulate the last step, for the stop rule to look
+                elif hits[0] > 0:
+                    first = int(samples[hits[0] - 1]) + 1
+                if first > 0:
+                    self._put_on_path(q_path[first - 1], dq_path[first - 1], tcp_velocity)
+                    self.skipped_steps += first
+            if stop is None:
+                last = int(samples[hits[-1] + 1]) if len(hits) and hits[-1] + 1 < len(samples) else 0
+                last = max(last, first)
+        for i in range(first, n_steps):
+            if i >= last and (i - last) % FREE_RECHECK_STEPS == 0 and self._world_still() \
+                    and not self._near(q_path[samples[samples >= i]]).any():
+                self._put_on_path(q_path[-1], dq_path[-1], tcp_velocity)
+                self.skipped_steps += n_steps - i
+                return False
             self._command(q_path[i], dq_path[i])
             self.step()
             self.q_cmd = q_path[i]
             if stop is not None and i % check_every == 0 and stop():
                 return True
         return False
+
+    # ---- free motion ---------------------------------------------------------------------
+    def _others(self) -> list[int]:
+        """Every body in the client but the robot, its pedestal and what it holds."""
+        c = self.client
+        mine = (self.uid, self.pedestal_uid, self.held[0] if self.held else None)
+        uids = (pb.getBodyUniqueId(i, physicsClientId=c) for i in range(pb.getNumBodies(physicsClientId=c)))
+        return [u for u in uids if u not in mine]
+
+    def _world_still(self) -> bool:
+        """Every other body at rest (`shelf_env.world`'s definition, under which the env puts it to
+        sleep): nothing that is not simulated while the arm keeps its distance could differ."""
+        for uid in self._others():
+            lin, ang = pb.getBaseVelocity(uid, physicsClientId=self.client)
+            if np.linalg.norm(lin) >= params.REST_LINEAR_SPEED or np.linalg.norm(ang) >= params.REST_ANGULAR_SPEED:
+                return False
+        return True
+
+    def _near(self, q_samples: np.ndarray) -> np.ndarray:
+        """Per joint configuration: does any part of the arm, or the object it holds, come within
+        ``FREE_MARGIN`` of another body? Puts the arm (and the object) at each configuration for
+        the query, and back where they were."""
+        c = self.client
+        out = np.zeros(len(q_samples), dtype=bool)
+        if len(q_samples) == 0:
+            return out
+        links = range(-1, pb.getNumJoints(self.uid, physicsClientId=c))
+        saved = pb.getJointStates(self.uid, self.joints, physicsClientId=c)
+        held = self.held[0] if self.held else None
+        if held is not None:
+            rel = self._object_in_cup(held)
+            held_pose = pb.getBasePositionAndOrientation(held, physicsClientId=c)
+            held_velocity = pb.getBaseVelocity(held, physicsClientId=c)
+        others = self._others()
+        boxes = np.array([pb.getAABB(u, physicsClientId=c) for u in others]).reshape(-1, 2, 3)
+        margins = [STATIC_MARGIN if pb.getDynamicsInfo(u, -1, physicsClientId=c)[0] == 0 else FREE_MARGIN
+                   for u in others]
+        for k, q in enumerate(q_samples):
+            self._put_joints(q)
+            movers = [(self.uid, np.array([pb.getAABB(self.uid, j, physicsClientId=c) for j in links]))]
+            if held is not None:
+                cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
+                                                   physicsClientId=c)[:2]
+                pb.resetBasePositionAndOrientation(held, *pb.multiplyTransforms(cup_pos, cup_orn, *rel),
+                                                   physicsClientId=c)
+                movers.append((held, np.array([pb.getAABB(held, physicsClientId=c)])))
+            for uid, own in movers:  # boxes first, then exact distances for the bodies whose boxes meet
+                meet = ((own[:, None, 0] - FREE_MARGIN <= boxes[None, :, 1])
+                        & (own[:, None, 1] + FREE_MARGIN >= boxes[None, :, 0])).all(-1).any(0)
+                if any(pb.getClosestPoints(uid, others[b], margins[b], physicsClientId=c)
+                       for b in np.flatnonzero(meet)):
+                    out[k] = True
+                    break
+        for j, (angle, velocity, *_) in zip(self.joints, saved):
+            pb.resetJointState(self.uid, j, angle, velocity, physicsClientId=c)
+        if held is not None:
+            pb.resetBasePositionAndOrientation(held, *held_pose, physicsClientId=c)
+            pb.resetBaseVelocity(held, *held_velocity, physicsClientId=c)
+        return out
+
+    def _put_joints(self, q: np.ndarray) -> None:
+        for j, angle in zip(self.joints, q):
+            pb.resetJointState(self.uid, j, float(angle), 0.0, physicsClientId=self.client)
+
+    def _put_on_path(self, q: np.ndarray, dq: np.ndarray, tcp_velocity: np.ndarray) -> None:
+        """The arm at ``q`` moving at ``dq`` (and what it holds, moving with the TCP), commanded
+        to go on with that motion, as if driven there."""
+        c = self.client
+        rel = self._object_in_cup(self.held[0]) if self.held else None
+        for j, angle, velocity in zip(self.joints, q, dq):
+            pb.resetJointState(self.uid, j, float(angle), float(velocity), physicsClientId=c)
+        self._command(q, dq)
+        self.q_cmd = np.array(q, dtype=float)
+        if self.held is not None and rel is not None:
+            cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
+                                               physicsClientId=c)[:2]
+            pb.resetBasePositionAndOrientation(self.held[0], *pb.multiplyTransforms(cup_pos, cup_orn, *rel),
+                                               physicsClientId=c)
+            pb.resetBaseVelocity(self.held[0], tuple(tcp_velocity), (0, 0, 0), physicsClientId=c)
 
     def hold_still(self, steps: int) -> None:
         self._command(self.q_cmd, np.zeros(ARM_JOINTS))
@@ -365,7 +499,7 @@ class Primitives:
             peak[0] = max(peak[0], force) if run[0] else peak[0]
             return run[0] >= watch.sustain
 
-        if not r.move_linear(start, end, speed, stop=dragging, check_every=1):
+        if not r.move_linear(start, end, speed, stop=dragging, check_every=1, skip_free=False):
             return False
         self.interventions.append({"primitive": "pick", "phase": phase, "force_n": round(peak[0], 3),
                                    "tcp": [round(float(v), 4) for v in self._commanded_tcp()],

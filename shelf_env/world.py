@@ -56,6 +56,61 @@ class Region:
         return (self.x0 + self.x1) / 2, (self.y0 + self.y1) / 2
 
 
+@dataclass(frozen=True)
+class Physics:
+    """How much simulation an action gets: speed, with outcomes equal up to Bullet's chaos.
+
+    ``solver_iterations``: at most this many sequential-impulse sweeps per physics step over the
+    contacts, the arm's motors and the suction constraint; ``solver_residual``: stop sweeping once
+    a sweep's largest squared velocity correction is below it (m²/s²). ``skip_free_motion``: do not
+    simulate the parts of the arm's motions where nothing can happen (`shelf_env.robot.Robot.move_linear`).
+
+    ``PHYSICS["reference"]`` is PyBullet's default solver (50 sweeps, 1e-7: in practice always 50)
+    with every motion simulated: the physics of every result before 2026-11-23.
+    ``PHYSICS["fast"]``, the default, is what `benchmarks/env_step.py --compare` measured as
+    cheaper with the same outcomes on a fixed scene set (`benchmarks/physics_outcomes.py`).
+    """
+
+    solver_iterations: int
+    solver_residual: float
+    skip_free_motion: bool
+
+    def __post_init__(self) -> None:
+        if isinstance(self.solver_iterations, bool) or not isinstance(self.solver_iterations, int) \
+                or self.solver_iterations < 1:
+            raise ValueError(f"solver_iterations must be a positive integer, got {self.solver_iterations!r}")
+        if not self.solver_residual >= 0:
+            raise ValueError(f"solver_residual must be >= 0, got {self.solver_residual!r}")
+
+    @classmethod
+    def named(cls, physics: str | Physics) -> Physics:
+        """A `Physics` from a name in `PHYSICS` (or an instance, returned as is)."""
+        if isinstance(physics, Physics):
+            return physics
+        if physics not in PHYSICS:
+            raise ValueError(f"unknown physics {physics!r}; expected one of {sorted(PHYSICS)} or a Physics")
+        return PHYSICS[physics]
+
+    @classmethod
+    def parse(cls, text: str) -> Physics:
+        """A name of `PHYSICS`, or ``ITERATIONS:RESIDUAL:SKIP`` (SKIP 0 or 1), as benchmarks take it."""
+        if ":" not in text:
+            return cls.named(text)
+        parts = text.split(":")
+        if len(parts) != 3 or parts[2] not in ("0", "1"):
+            raise ValueError(f"physics {text!r} is not a name or ITERATIONS:RESIDUAL:SKIP (SKIP 0 or 1)")
+        try:
+            return cls(int(parts[0]), float(parts[1]), parts[2] == "1")
+        except ValueError as err:
+            raise ValueError(f"physics {text!r}: {err}") from None
+
+
+PHYSICS: dict[str, Physics] = {
+    "reference": Physics(solver_iterations=50, solver_residual=1e-7, skip_free_motion=False),
+    "fast": Physics(solver_iterations=20, solver_residual=1e-5, skip_free_motion=True),
+}
+
+
 @dataclass
 class PlacedObject:
     """An object body in the world, with its class."""
@@ -123,11 +178,15 @@ def sample_regions(
 class World:
     """A PyBullet client holding the cabinet, the ground and the current objects."""
 
-    def __init__(self, client: int, sleeping: bool = True) -> None:
+    def __init__(self, client: int, sleeping: bool = True, physics: str | Physics = "fast") -> None:
         self.client = client
         self.sleeping = bool(sleeping)
+        self.physics = Physics.named(physics)
         pb.setGravity(0, 0, -9.81, physicsClientId=client)
         pb.setTimeStep(params.TIME_STEP, physicsClientId=client)
+        pb.setPhysicsEngineParameter(numSolverIterations=self.physics.solver_iterations,
+                                     solverResidualThreshold=self.physics.solver_residual,
+                                     physicsClientId=client)
         self._shape_cache: dict[tuple, int] = {}
         self.static_uids: list[int] = []
         self._build_static()
