@@ -203,7 +203,7 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
 
 
 #: Env options an evaluation may set (the rest of the env is fixed by the protocol and the policy).
-CONDITION_KEYS = ("perception_noise", "closed_loop")
+CONDITION_KEYS = ("perception_noise", "closed_loop", "physics")
 
 
 def check_conditions(conditions: dict[str, Any] | None) -> dict[str, Any]:
@@ -217,6 +217,12 @@ def check_conditions(conditions: dict[str, Any] | None) -> dict[str, Any]:
     PerceptionNoise.from_any(conditions.get("perception_noise"))
     if not isinstance(conditions.get("closed_loop", False), bool):
         raise ValueError(f"closed_loop must be true or false, got {conditions['closed_loop']!r}")
+    if "physics" in conditions:
+        from shelf_env.world import PHYSICS, Physics
+
+        if not isinstance(conditions["physics"], str):
+            raise ValueError(f"physics must be one of {sorted(PHYSICS)}, got {conditions['physics']!r}")
+        Physics.named(conditions["physics"])
     return conditions
 
 

@@ -177,6 +177,11 @@ def test_evaluation_under_conditions_and_one_condition_set_per_folder(tmp_path, 
     assert "dropout must be a probability" in capsys.readouterr().err
     with pytest.raises(ValueError, match="unknown evaluation conditions"):
         ev.check_conditions({"gravity": 1})
+    assert evaluate_cli.main([*grid, "--out", str(tmp_path / "y"), "--physics", "slow"]) == 2
+    assert "unknown physics 'slow'" in capsys.readouterr().err
+    ref = tmp_path / "ref"
+    assert evaluate_cli.main([*grid, "--out", str(ref), "--physics", "reference"]) == 0
+    assert json.loads((ref / "conditions.json").read_text()) == {"physics": "reference"}
 
 
 def test_plot_conditions_draws_curves_from_two_evaluations(tmp_path, capsys):

@@ -78,6 +78,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--perception-noise", type=json_object, default=None, metavar="JSON",
                    help='evaluate under perception noise, e.g. \'{"dropout": 0.1, "class_flip": 0.05}\'')
     p.add_argument("--closed-loop", action="store_true", help="evaluate with closed-loop primitives")
+    p.add_argument("--physics", default=None, metavar="NAME",
+                   help='"reference" to evaluate on the physics of results before 2026-11-23 '
+                        '(default: the env\'s, "fast"; shelf_env.world.PHYSICS)')
     p.add_argument("--backend", choices=["local", "ray"], default="local",
                    help="local worker processes (default) or Ray tasks (the ray extra)")
     p.add_argument("--ray-address", default=None,
@@ -196,7 +199,8 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError("--ray-address needs --backend ray")
         conditions = ev.check_conditions(
             {**({"perception_noise": args.perception_noise} if args.perception_noise is not None else {}),
-             **({"closed_loop": True} if args.closed_loop else {})})
+             **({"closed_loop": True} if args.closed_loop else {}),
+             **({"physics": args.physics} if args.physics is not None else {})})
         check_out_conditions(args.out, conditions)
     except ValueError as err:
         print(f"shelf-evaluate: error: {err}", file=sys.stderr)
