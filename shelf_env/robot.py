@@ -27,6 +27,7 @@ import numpy as np
 import pybullet as pb
 
 from shelf_env import kinematics, params
+from shelf_env.world import is_at_rest
 
 # Tool geometry (must match assets/ur5_blade.urdf): TCP in the ee_link frame, and heights of the
 # blade relative to the TCP.
@@ -141,10 +142,17 @@ class Robot:
                                           physicsClientId=self.client)[4])
 
     # ---- low-level motion ----------------------------------------------------------------
-    def _set_joints(self, q: np.ndarray) -> None:
-        for j, angle in zip(self.joints, q):
-            pb.resetJointState(self.uid, j, float(angle), 0.0, physicsClientId=self.client)
-        self._command(q, np.zeros(ARM_JOINTS))
+    def _reset_joints(self, q, dq=None) -> None:
+        """Joint angles ``q`` and velocities ``dq`` (default 0), motors untouched."""
+        dq = np.zeros(ARM_JOINTS) if dq is None else dq
+        for j, angle, velocity in zip(self.joints, q, dq):
+            pb.resetJointState(self.uid, j, float(angle), float(velocity), physicsClientId=self.client)
+
+    def _set_joints(self, q: np.ndarray, dq: np.ndarray | None = None) -> None:
+        """The arm at ``q`` moving at ``dq`` (default still), its motors commanded to go on so."""
+        dq = np.zeros(ARM_JOINTS) if dq is None else dq
+        self._reset_joints(q, dq)
+        self._command(q, dq)
         self.q_cmd = np.array(q, dtype=float)
 
     def _command(self, q: np.ndarray, dq: np.ndarray) -> None:
@@ -162,17 +170,7 @@ class Robot:
         """Put the arm (and a held object) at a TCP position without simulating the way there.
         Only used outside the cabinet; see the module docstring."""
         q = self.ik(np.asarray(tcp, dtype=float))[0]
-        if self.held is None:
-            self._set_joints(q)
-            return
-        obj, _ = self.held
-        rel = self._object_in_cup(obj)
-        self._set_joints(q)
-        cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
-                                           physicsClientId=self.client)[:2]
-        pos, orn = pb.multiplyTransforms(cup_pos, cup_orn, *rel)
-        pb.resetBasePositionAndOrientation(obj, pos, orn, physicsClientId=self.client)
-        pb.resetBaseVelocity(obj, (0, 0, 0), (0, 0, 0), physicsClientId=self.client)
+        self._put_on_path(q, np.zeros(ARM_JOINTS), np.zeros(3))
 
     def go_home(self) -> None:
         self._set_joints(self.q_home)
@@ -251,11 +249,7 @@ class Robot:
     def _world_still(self) -> bool:
         """Every other body at rest (`shelf_env.world`'s definition, under which the env puts it to
         sleep): nothing that is not simulated while the arm keeps its distance could differ."""
-        for uid in self._others():
-            lin, ang = pb.getBaseVelocity(uid, physicsClientId=self.client)
-            if np.linalg.norm(lin) >= params.REST_LINEAR_SPEED or np.linalg.norm(ang) >= params.REST_ANGULAR_SPEED:
-                return False
-        return True
+        return all(is_at_rest(self.client, uid) for uid in self._others())
 
     def _near(self, q_samples: np.ndarray) -> np.ndarray:
         """Per joint configuration: does any part of the arm, or the object it holds, come within
@@ -277,13 +271,10 @@ class Robot:
         margins = [STATIC_MARGIN if pb.getDynamicsInfo(u, -1, physicsClientId=c)[0] == 0 else FREE_MARGIN
                    for u in others]
         for k, q in enumerate(q_samples):
-            self._put_joints(q)
+            self._reset_joints(q)
             movers = [(self.uid, np.array([pb.getAABB(self.uid, j, physicsClientId=c) for j in links]))]
             if held is not None:
-                cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
-                                                   physicsClientId=c)[:2]
-                pb.resetBasePositionAndOrientation(held, *pb.multiplyTransforms(cup_pos, cup_orn, *rel),
-                                                   physicsClientId=c)
+                self._follow_cup(held, rel)
                 movers.append((held, np.array([pb.getAABB(held, physicsClientId=c)])))
             for uid, own in movers:  # boxes first, then exact distances for the bodies whose boxes meet
                 meet = ((own[:, None, 0] - FREE_MARGIN <= boxes[None, :, 1])
@@ -292,32 +283,30 @@ class Robot:
                        for b in np.flatnonzero(meet)):
                     out[k] = True
                     break
-        for j, (angle, velocity, *_) in zip(self.joints, saved):
-            pb.resetJointState(self.uid, j, angle, velocity, physicsClientId=c)
+        self._reset_joints([j[0] for j in saved], [j[1] for j in saved])
         if held is not None:
             pb.resetBasePositionAndOrientation(held, *held_pose, physicsClientId=c)
             pb.resetBaseVelocity(held, *held_velocity, physicsClientId=c)
         return out
 
-    def _put_joints(self, q: np.ndarray) -> None:
-        for j, angle in zip(self.joints, q):
-            pb.resetJointState(self.uid, j, float(angle), 0.0, physicsClientId=self.client)
+    def _follow_cup(self, obj: int, rel: tuple[tuple, tuple]) -> None:
+        """Put body ``obj`` at pose ``rel`` in the cup's frame (where it hangs when held)."""
+        cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
+                                           physicsClientId=self.client)[:2]
+        pb.resetBasePositionAndOrientation(obj, *pb.multiplyTransforms(cup_pos, cup_orn, *rel),
+                                           physicsClientId=self.client)
 
     def _put_on_path(self, q: np.ndarray, dq: np.ndarray, tcp_velocity: np.ndarray) -> None:
-        """The arm at ``q`` moving at ``dq`` (and what it holds, moving with the TCP), commanded
-        to go on with that motion, as if driven there."""
-        c = self.client
-        rel = self._object_in_cup(self.held[0]) if self.held else None
-        for j, angle, velocity in zip(self.joints, q, dq):
-            pb.resetJointState(self.uid, j, float(angle), float(velocity), physicsClientId=c)
-        self._command(q, dq)
-        self.q_cmd = np.array(q, dtype=float)
-        if self.held is not None and rel is not None:
-            cup_pos, cup_orn = pb.getLinkState(self.uid, self.cup_link, computeForwardKinematics=True,
-                                               physicsClientId=c)[:2]
-            pb.resetBasePositionAndOrientation(self.held[0], *pb.multiplyTransforms(cup_pos, cup_orn, *rel),
-                                               physicsClientId=c)
-            pb.resetBaseVelocity(self.held[0], tuple(tcp_velocity), (0, 0, 0), physicsClientId=c)
+        """The arm at ``q`` moving at ``dq`` (and what it holds, moving with the TCP at
+        ``tcp_velocity``), commanded to go on with that motion, as if driven there."""
+        if self.held is None:
+            self._set_joints(q, dq)
+            return
+        obj = self.held[0]
+        rel = self._object_in_cup(obj)
+        self._set_joints(q, dq)
+        self._follow_cup(obj, rel)
+        pb.resetBaseVelocity(obj, tuple(tcp_velocity), (0, 0, 0), physicsClientId=self.client)
 
     def hold_still(self, steps: int) -> None:
         self._command(self.q_cmd, np.zeros(ARM_JOINTS))

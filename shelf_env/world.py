@@ -56,6 +56,12 @@ class Region:
         return (self.x0 + self.x1) / 2, (self.y0 + self.y1) / 2
 
 
+def is_at_rest(client: int, uid: int) -> bool:
+    """Is body ``uid`` at rest: slower than REST_LINEAR_SPEED and REST_ANGULAR_SPEED (module docstring)?"""
+    lin, ang = pb.getBaseVelocity(uid, physicsClientId=client)
+    return bool(np.linalg.norm(lin) < params.REST_LINEAR_SPEED and np.linalg.norm(ang) < params.REST_ANGULAR_SPEED)
+
+
 @dataclass(frozen=True)
 class Physics:
     """How much simulation an action gets: speed, with outcomes equal up to Bullet's chaos.
@@ -181,11 +187,11 @@ class World:
     def __init__(self, client: int, sleeping: bool = True, physics: str | Physics = "fast") -> None:
         self.client = client
         self.sleeping = bool(sleeping)
-        self.physics = Physics.named(physics)
+        solver = Physics.named(physics)  # the robot reads skip_free_motion; the world sets the solver
         pb.setGravity(0, 0, -9.81, physicsClientId=client)
         pb.setTimeStep(params.TIME_STEP, physicsClientId=client)
-        pb.setPhysicsEngineParameter(numSolverIterations=self.physics.solver_iterations,
-                                     solverResidualThreshold=self.physics.solver_residual,
+        pb.setPhysicsEngineParameter(numSolverIterations=solver.solver_iterations,
+                                     solverResidualThreshold=solver.solver_residual,
                                      physicsClientId=client)
         self._shape_cache: dict[tuple, int] = {}
         self.static_uids: list[int] = []
@@ -345,12 +351,7 @@ class World:
 
     def at_rest(self) -> np.ndarray:
         """Boolean per object: is it at rest (see module docstring)?"""
-        out = []
-        for o in self.objects:
-            lin, ang = pb.getBaseVelocity(o.uid, physicsClientId=self.client)
-            out.append(np.linalg.norm(lin) < params.REST_LINEAR_SPEED
-                       and np.linalg.norm(ang) < params.REST_ANGULAR_SPEED)
-        return np.array(out, dtype=bool)
+        return np.array([is_at_rest(self.client, o.uid) for o in self.objects], dtype=bool)
 
     def sleep_resting(self) -> None:
         """Put every object at rest to sleep (no-op unless ``sleeping``); see module docstring."""
