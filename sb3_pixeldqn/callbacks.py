@@ -18,6 +18,12 @@ Two promotion rules:
   ``threshold`` of them succeed. Scenes come from reset seeds drawn from ``eval_seed``'s own
   stream, never from the training env's.
 
+Either rule can be given a stage cap, ``max_stage_timesteps``: a stage that has not passed after
+that many env steps is promoted anyway (its steps are listed in ``capped``). It is for stages
+whose gate a policy cannot pass for reasons outside its control, e.g. an env where objects fall
+out in a share of episodes that no policy can avoid, so that a success threshold meant for
+easier settings would hold the curriculum at one N for the rest of the budget.
+
 With an ``eval_env`` the greedy checks run under either gate (``greedy_history``, logged as
 ``curriculum/greedy_success``): the learning curve of the policy that will be shipped.
 """
@@ -54,6 +60,8 @@ class CurriculumCallback(BaseCallback):
     :param min_stage_timesteps: env steps a stage lasts at least (0: as the paper). Setting it to
         the algorithm's ``exploration_timesteps`` makes a stage advance only once ε has decayed,
         so that the success that promotes it is the policy's rather than exploration's.
+    :param max_stage_timesteps: env steps after which a stage that has not passed its gate is
+        promoted anyway (0: never, as the paper); at least ``min_stage_timesteps`` when set.
     :param gate: ``"training"`` (the paper's rule) or ``"greedy"`` (see the module docstring).
     :param eval_env: a Gymnasium env (not vectorised) with the ``setter`` method, for greedy checks
         (needed by the greedy gate; optional under the training gate, where they only log).
@@ -74,6 +82,7 @@ class CurriculumCallback(BaseCallback):
         threshold: float = THRESHOLD,
         setter: str = "set_num_objects",
         min_stage_timesteps: int = 0,
+        max_stage_timesteps: int = 0,
         gate: str = "training",
         eval_env: gym.Env | None = None,
         eval_every: int = EVAL_EVERY,
@@ -98,7 +107,11 @@ class CurriculumCallback(BaseCallback):
         self.window = window
         self.threshold = threshold
         self.setter = setter
+        if min_stage_timesteps < 0 or max_stage_timesteps < 0 or 0 < max_stage_timesteps < min_stage_timesteps:
+            raise ValueError("need min_stage_timesteps >= 0 and max_stage_timesteps 0 (no cap) or >= "
+                             f"min_stage_timesteps, got {min_stage_timesteps} and {max_stage_timesteps}")
         self.min_stage_timesteps = int(min_stage_timesteps)
+        self.max_stage_timesteps = int(max_stage_timesteps)
         self.gate = gate
         self.eval_env = eval_env
         self.eval_every = int(eval_every)
@@ -111,6 +124,8 @@ class CurriculumCallback(BaseCallback):
         self.value = start_value
         self.outcomes: deque[bool] = deque(maxlen=window)
         self.history: list[list[int]] = []
+        #: Env steps at which a stage was promoted by ``max_stage_timesteps`` rather than its gate.
+        self.capped: list[int] = []
         self._stale = np.zeros(0, dtype=bool)
 
     def _init_callback(self) -> None:
@@ -120,12 +135,14 @@ class CurriculumCallback(BaseCallback):
             self.outcomes = deque((bool(x) for x in state["outcomes"]), maxlen=self.window)
             self.history = [[int(t), int(n)] for t, n in state["history"]]
             self.greedy_history = [list(h) for h in state.get("greedy_history", [])]
+            self.capped = [int(t) for t in state.get("capped", [])]
             if "eval_rng" in state:
                 self.eval_rng.bit_generator.state = state["eval_rng"]
         else:
             self.value = self.start_value
             self.outcomes.clear()
             self.history = [[self.model.num_timesteps, self.value]]
+            self.capped = []
         self._stale = np.zeros(self.training_env.num_envs, dtype=bool)
         self._last_check = int(self.greedy_history[-1][0]) if self.greedy_history else self.model.num_timesteps
         self._save_state()
@@ -172,6 +189,16 @@ class CurriculumCallback(BaseCallback):
             and float(np.mean(self.outcomes)) > self.threshold
             and long_enough
         ):
+            self._advance()
+        if (
+            self.max_stage_timesteps
+            and self.value < self.max_value
+            and self.model.num_timesteps - self.history[-1][0] >= self.max_stage_timesteps
+        ):
+            self.capped.append(self.model.num_timesteps)
+            if self.verbose:
+                print(f"curriculum: N = {self.value} not passed in {self.max_stage_timesteps} steps; "
+                      "promoted by the stage cap")
             self._advance()
         self.logger.record("curriculum/num_objects", self.value)
         if changed:  # _advance saves its own change
@@ -225,6 +252,7 @@ class CurriculumCallback(BaseCallback):
             "outcomes": list(self.outcomes),
             "history": [list(h) for h in self.history],
             "greedy_history": [list(h) for h in self.greedy_history],
+            "capped": list(self.capped),
             "eval_rng": self.eval_rng.bit_generator.state,
         }
         self.model.curriculum_state = state  # type: ignore[attr-defined]

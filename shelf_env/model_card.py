@@ -85,8 +85,16 @@ def model_card(run: pathlib.Path, zip_path: pathlib.Path, results: pathlib.Path 
            f"({progress.get('demo_seconds', 0) / 60:.1f} min of it collecting demonstrations), "
            f"{len(sessions)} session(s).",
            "- Hardware: " + ("; ".join(machines) if machines else "not recorded"), "",
-           "| N | reached at env step | wall-clock minutes |", "|---|---|---|"]
-    out += [f"| {n} | {step} | {'-' if minutes is None else f'{minutes:.0f}'} |" for n, step, minutes in stages]
+           "| N | reached at env step | wall-clock minutes | reached by |", "|---|---|---|---|"]
+    capped = set(curriculum.get("capped", []))
+    cap = config.get("max_stage_timesteps", 0)
+    for i, (n, step, minutes) in enumerate(stages):
+        how = "start" if i == 0 else (f"stage cap ({cap} steps)" if step in capped else "greedy gate"
+                                      if config["gate"] == "greedy" else "training gate")
+        out.append(f"| {n} | {step} | {'-' if minutes is None else f'{minutes:.0f}'} | {how} |")
+    for change in progress.get("amendments", []):
+        out += ["", f"Configuration amended from env step {change['timesteps']} (`shelf-train --amend`): "
+                + ", ".join(f"`{k} = {v}`" for k, v in change["changes"].items()) + "."]
     if greedy:
         step, n, rate = greedy[-1]
         out += ["", f"Last greedy check (20 fresh scenes): {100 * rate:.0f} % at N = {int(n)}, step {int(step)}."]

@@ -83,6 +83,8 @@ class TrainConfig:
     start_objects: int = 1
     max_objects: int = 8
     min_stage_timesteps: int = 0
+    # a stage not passed after this many env steps is promoted anyway (0: never)
+    max_stage_timesteps: int = 0
     eval_every: int = 500
     eval_episodes: int = 20
     eval_max_actions: int | None = 20
@@ -121,6 +123,11 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.pixel_size must be in [0.002, 0.02] m, got {self.pixel_size}")
         if self.batch_size < 1 or self.buffer_size < 1 or self.gradient_steps < 1 or self.learning_rate <= 0:
             raise ValueError("TrainConfig needs batch_size, buffer_size, gradient_steps >= 1 and learning_rate > 0")
+        if self.min_stage_timesteps < 0 or not (
+            self.max_stage_timesteps == 0 or self.max_stage_timesteps >= max(1, self.min_stage_timesteps)
+        ):
+            raise ValueError("TrainConfig needs min_stage_timesteps >= 0 and max_stage_timesteps 0 (no cap) or >= "
+                             f"min_stage_timesteps, got {self.min_stage_timesteps} and {self.max_stage_timesteps}")
         if self.tb_images_every < 0:
             raise ValueError(f"TrainConfig.tb_images_every must be >= 0, got {self.tb_images_every}")
 
@@ -144,8 +151,12 @@ class TrainConfig:
 
 _RECIPE = TrainConfig()
 #: Issue 10's models: the recipe through the curriculum N = 1 -> 8, with greedy checks allowed
-#: 3 actions per object from N = 7 on (20 below), P+S and the pick-only S.
-_CURRICULUM = _RECIPE.replace(eval_actions_per_object=3.0)
+#: 3 actions per object from N = 7 on (20 below), P+S and the pick-only S. A stage that has not
+#: passed the 90 % greedy gate after 5000 env steps is promoted anyway: from N = 6 on, objects fall
+#: out of the cabinet in ~20 % of the P+S run's episodes (most of them dragged out by a pick's
+#: retreat, as in the paper's §V-d), so the gate is out of reach and the run had stayed at N = 6
+#: for 10,000 steps with a flat success rate (docs/learning.md, "Stage cap").
+_CURRICULUM = _RECIPE.replace(eval_actions_per_object=3.0, max_stage_timesteps=5000)
 
 PRESETS: dict[str, TrainConfig] = {
     "recipe": _RECIPE,
@@ -266,7 +277,7 @@ def make_curriculum(config: TrainConfig, seed: int = 0, verbose: int = 1) -> Any
 
     return CurriculumCallback(
         start_value=config.start_objects, max_value=config.max_objects, min_stage_timesteps=config.min_stage_timesteps,
-        gate=config.gate, eval_env=make_env(config), eval_every=config.eval_every,
-        eval_episodes=config.eval_episodes, eval_seed=seed + 10**6, eval_max_actions=eval_action_limit(config),
-        verbose=verbose,
+        max_stage_timesteps=config.max_stage_timesteps, gate=config.gate, eval_env=make_env(config),
+        eval_every=config.eval_every, eval_episodes=config.eval_episodes, eval_seed=seed + 10**6,
+        eval_max_actions=eval_action_limit(config), verbose=verbose,
     )

@@ -56,6 +56,34 @@ def test_min_stage_timesteps_holds_a_stage():
     assert [t for t, _ in curriculum.history] == [0, 12, 24]
 
 
+def test_max_stage_timesteps_promotes_a_stage_that_cannot_pass(tmp_path):
+    # p_success 0.5 never passes a 90 % gate: only the cap promotes, every 15 steps, up to max_value
+    model = PixelDoubleDQN("FCNPolicy", CoinEnv(p_success=0.5), **KW)
+    curriculum = CurriculumCallback(window=10, threshold=0.9, max_value=3, max_stage_timesteps=15)
+    model.learn(50, callback=curriculum)
+    assert curriculum.history == [[0, 1], [15, 2], [30, 3]]
+    assert curriculum.capped == [15, 30] == model.curriculum_state["capped"]
+    # the cap survives save/load: a resumed run knows which stages were capped
+    model.save(tmp_path / "m.zip")
+    loaded = PixelDoubleDQN.load(tmp_path / "m.zip", env=CoinEnv(p_success=0.5))
+    resumed = CurriculumCallback(window=10, threshold=0.9, max_value=3, max_stage_timesteps=15)
+    loaded.learn(5, callback=resumed, reset_num_timesteps=False)
+    assert resumed.capped == [15, 30] and resumed.value == 3
+
+
+def test_max_stage_timesteps_leaves_passing_stages_alone():
+    model = PixelDoubleDQN("FCNPolicy", CoinEnv(p_success=1.0), **KW)
+    curriculum = CurriculumCallback(window=5, max_value=3, max_stage_timesteps=100)
+    model.learn(30, callback=curriculum)
+    assert curriculum.value == 3 and curriculum.capped == []
+
+
+@pytest.mark.parametrize("low, high", [(-1, 0), (0, -5), (20, 10)])
+def test_bad_stage_bounds_are_refused(low, high):
+    with pytest.raises(ValueError, match="max_stage_timesteps"):
+        CurriculumCallback(min_stage_timesteps=low, max_stage_timesteps=high)
+
+
 def test_several_envs_all_get_the_new_n():
     env = make_vec_env(lambda: CoinEnv(p_success=1.0), n_envs=3)
     model = PixelDoubleDQN("FCNPolicy", env, **KW)

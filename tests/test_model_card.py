@@ -13,8 +13,9 @@ def fake_run(tmp_path):
     run.mkdir()
     progress = {"wall_seconds": 7200.0, "timesteps": 9000, "episodes": 4, "demo_seconds": 75.0,
                 "config": PRESETS["p_s"].to_dict(),
-                "curriculum": {"value": 3, "history": [[0, 1], [500, 2], [1200, 3]],
+                "curriculum": {"value": 3, "history": [[0, 1], [500, 2], [1200, 3]], "capped": [1200],
                                "greedy_history": [[1000, 2, 0.9], [1500, 3, 0.85]]},
+                "amendments": [{"timesteps": 1100, "changes": {"max_stage_timesteps": 5000}}],
                 "sessions": [{"machine": "Linux x86_64, 2 CPUs", "torch_threads": 2, "device": "cpu",
                               "started": "2026-11-24T00:00:00+00:00", "timesteps": 0, "wall_seconds": 0.0,
                               "buffer_kept": False}]}
@@ -39,7 +40,9 @@ def test_card_has_training_history_and_the_evaluation_beside_other_policies(tmp_
     assert card.startswith("# `p_s.zip`: PixelDoubleDQN, P+S")
     assert "`bash scripts/train_model.sh p_s`" in card and "9000 env steps, 2.00 h" in card
     assert "Linux x86_64, 2 CPUs, 2 torch threads, cpu" in card
-    assert "| 2 | 500 | 10 |" in card and "| 3 | 1200 | 25 |" in card  # stage, step, minutes
+    # stage, step, minutes, and whether the gate or the stage cap promoted it
+    assert "| 2 | 500 | 10 | greedy gate |" in card and "| 3 | 1200 | 25 | stage cap (5000 steps) |" in card
+    assert "amended from env step 1100 (`shelf-train --amend`): `max_stage_timesteps = 5000`" in card
     assert "85 % at N = 3, step 1500" in card
     assert "| objects | N | p_s SR % | h-d SR % | p_s AE | p_s mAE |" in card
     assert "| ycb | 3 | 100.0 ± 0.0 | 50.0 ± 0.0 | 0.60 | 0.60 |" in card

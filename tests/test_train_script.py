@@ -64,3 +64,30 @@ def test_mirror_keeps_a_committable_copy_and_a_fresh_machine_resumes_from_it(tmp
     model.load_replay_buffer(fresh / "replay.pkl")
     assert model.replay_buffer.demonstrations.n_stored >= 3  # demonstrations collected again
     assert model.replay_buffer.size() == 3  # only the new steps: the old buffer was not committed
+
+
+def test_amend_changes_a_resumed_runs_curriculum_and_records_when(tmp_path, capsys):
+    """--amend: a resumed run takes up a new stage cap from its next step (recorded in progress.json
+    with that step); a fresh run, a field the model depends on or a bad value is refused in one line."""
+    common = ["--out", str(tmp_path), "--learning-starts", "2", "--buffer-size", "200", "--widths", "4", "8", "8",
+              "--checkpoint-minutes", "0", "--threads", "1", "--set", "demo_steps=3", "--set", "eval_every=1000"]
+    assert train.main([*common, "--max-steps", "3", "--amend", "max_stage_timesteps=2"]) == 2
+    assert "use --set for a new run" in capsys.readouterr().err and not (tmp_path / "progress.json").exists()
+    train.main([*common, "--max-steps", "3"])
+    before = (tmp_path / "progress.json").read_text()
+    for bad, message in ((["--amend", "widths=[8,8,8]"], "cannot change ['widths']"),
+                         (["--amend", "max_stage_timesteps=-3"], "max_stage_timesteps")):
+        assert train.main([*common, "--max-steps", "9", *bad]) == 2
+        assert message in capsys.readouterr().err
+        assert (tmp_path / "progress.json").read_text() == before  # nothing written
+    train.main([*common, "--max-steps", "9", "--amend", "max_stage_timesteps=2"])
+    progress = json.loads((tmp_path / "progress.json").read_text())
+    assert progress["amendments"] == [{"timesteps": 3, "changes": {"max_stage_timesteps": 2}}]
+    assert progress["config"]["max_stage_timesteps"] == 2
+    # N = 1 had lasted 3 steps when the cap of 2 arrived: promoted at once, then every 2 steps
+    history = progress["curriculum"]["history"]
+    assert history[0] == [0, 1] and history[1] == [4, 2] and [n for _, n in history] == list(range(1, len(history) + 1))
+    assert progress["curriculum"]["capped"] == [t for t, _ in history[1:]]
+    # the same amendment again changes nothing and records nothing
+    train.main([*common, "--max-steps", "10", "--amend", "max_stage_timesteps=2"])
+    assert len(json.loads((tmp_path / "progress.json").read_text())["amendments"]) == 1

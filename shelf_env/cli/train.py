@@ -14,6 +14,11 @@ same command again resumes from the last checkpoint until the total budget is sp
 ``episodes.csv`` written after that checkpoint are dropped, as their steps are redone.
 ``python examples/plot_training.py runs/curriculum`` turns ``episodes.csv`` into a PNG.
 
+A resumed run keeps its configuration; ``--amend KEY=VALUE`` changes one of the fields that a
+running curriculum can take up (``AMENDABLE``: stage bounds and greedy checks, not the network,
+the env or the optimiser) and records the change and the env step it took effect at in
+``progress.json`` (``amendments``), so that the run's history says what it ran under and when.
+
 ``--mirror DIR`` keeps a copy of everything but the replay buffer (``model.zip``,
 ``progress.json``, ``episodes.csv``, ``tb/``) in ``DIR`` after every checkpoint, for committing.
 A run whose ``--out`` has no checkpoint (a fresh machine) starts from that copy: it resumes from
@@ -47,13 +52,17 @@ from shelf_env.training import (
     make_model,
 )
 
+#: TrainConfig fields ``--amend`` may change in a resumed run: what the curriculum callback reads
+#: when it is built, nothing the saved model or its replay buffer depends on.
+AMENDABLE = ("max_stage_timesteps", "min_stage_timesteps", "max_objects", "eval_every", "eval_episodes",
+             "eval_max_actions", "eval_actions_per_object", "tb_images_every")
 EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
 
 
 def parse_set(text: str) -> tuple[str, Any]:
     """"key=value" with value parsed as JSON when it can be (numbers, true/false, null, lists)."""
     if "=" not in text:
-        raise argparse.ArgumentTypeError(f"--set needs key=value, got {text!r}")
+        raise argparse.ArgumentTypeError(f"--set and --amend need key=value, got {text!r}")
     key, value = text.split("=", 1)
     try:
         return key, json.loads(value)
@@ -84,6 +93,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--exploration-timesteps", type=int, default=None)
     p.add_argument("--min-stage-timesteps", type=int, default=None,
                    help="curriculum stages last at least this many steps (0: no minimum)")
+    p.add_argument("--max-stage-timesteps", type=int, default=None,
+                   help="promote a curriculum stage not passed after this many steps (0: never)")
+    p.add_argument("--amend", dest="amendments", type=parse_set, action="append", default=[], metavar="KEY=VALUE",
+                   help=f"change a resumed run's configuration from now on; one of {', '.join(AMENDABLE)}")
     p.add_argument("--uniform-exploration", action="store_true", help="draw exploratory actions uniformly")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
@@ -98,7 +111,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     for flag, key in (("start_objects", "start_objects"), ("max_objects", "max_objects"),
                       ("buffer_size", "buffer_size"), ("learning_starts", "learning_starts"),
                       ("learning_rate", "learning_rate"), ("exploration_timesteps", "exploration_timesteps"),
-                      ("min_stage_timesteps", "min_stage_timesteps")):
+                      ("min_stage_timesteps", "min_stage_timesteps"),
+                      ("max_stage_timesteps", "max_stage_timesteps")):
         if getattr(args, flag) is not None:
             changes[key] = getattr(args, flag)
     if args.widths is not None:
@@ -219,6 +233,19 @@ def truncate_csv(path: pathlib.Path, rows: int) -> None:
     write_text_atomically(path, "".join(lines[: rows + 1]))
 
 
+def amend(config: TrainConfig, progress: dict, changes: dict[str, Any]) -> TrainConfig:
+    """``config`` with ``changes`` applied (checked by TrainConfig), recorded in ``progress``'s
+    ``amendments`` with the env step they take effect at; fields already at their value are no change."""
+    changes = {key: value for key, value in changes.items() if getattr(config, key) != value}
+    if not changes:
+        return config
+    amended = config.replace(**changes)
+    progress.setdefault("amendments", []).append({"timesteps": int(progress["timesteps"]), "changes": changes})
+    progress["config"] = amended.to_dict()
+    print(f"amended from step {progress['timesteps']}: {changes}", flush=True)
+    return amended
+
+
 def main(argv: list[str] | None = None) -> int:
     """Train (or resume) as the flags say; 0 when done, 2 with one line on stderr for bad input."""
     args = parse_args(argv)
@@ -229,6 +256,17 @@ def main(argv: list[str] | None = None) -> int:
         resuming = (args.out / "model.zip").exists() or mirrored
         if not resuming:  # a fresh run: its configuration is checked before anything is written
             config_from_args(args)  # TrainConfig checks its fields and values
+            if args.amendments:
+                raise ValueError(f"--amend changes a resumed run, and {args.out} holds none; use --set for a new run")
+        bad = sorted({key for key, _ in args.amendments} - set(AMENDABLE))
+        if bad:
+            raise ValueError(f"--amend cannot change {bad}; amendable fields: {list(AMENDABLE)}")
+        if args.amendments:  # checked against the stored configuration before anything is written
+            stored = args.out if (args.out / "progress.json").exists() else args.mirror
+            if stored is None or not (stored / "progress.json").exists():
+                raise ValueError(f"--amend: no progress.json in {args.out} or --mirror to amend")
+            TrainConfig.from_dict(json.loads((stored / "progress.json").read_text())["config"]).replace(
+                **dict(args.amendments))
     except ValueError as err:
         print(f"shelf-train: error: {err}", file=sys.stderr)
         return 2
@@ -248,6 +286,7 @@ def train(args: argparse.Namespace) -> None:
     if resume:  # the run's own configuration wins over the flags
         progress = json.loads(progress_path.read_text())
         config = TrainConfig.from_dict(progress["config"])
+        config = amend(config, progress, dict(args.amendments))
     else:
         config = config_from_args(args)
         progress = {"wall_seconds": 0.0, "timesteps": 0, "episodes": 0, "demo_seconds": 0.0,
