@@ -1,6 +1,6 @@
 """Fuzzing ShelfSort-v0: 20,000 actions over N = 1..14 and both object sets (slow; ``-m slow``).
 
-    python -m pytest -q -m slow tests/test_fuzz.py          # 20,000 actions on 2 worker processes
+    python -m pytest -q -m slow tests/test_fuzz.py          # 20,000 actions on 2 worker processes (~56 min)
     SHELF_FUZZ_ACTIONS=500 python -m pytest -q -m slow tests/test_fuzz.py   # a quick look
 
 Every (object set, N) cell plays its share of actions, drawn from three streams in turn: uniform
@@ -10,6 +10,9 @@ must answer with the documented `ValueError` and leave the episode untouched. It
 step: observation shape and dtype, reward in {-10, -1, 0}, finite object poses, bool flags,
 consistent info counters; and that the body count is the same after every reset (1,000 resets
 and more over the run).
+
+Run time (2026-11-23, the fast physics, 2 workers on an idle 2-core machine): 3347 s for 19,992
+actions (714 per cell; now 715), 2150 resets, 812 bad actions refused, 746 falls, 157 sorted episodes.
 """
 
 from __future__ import annotations
@@ -105,7 +108,7 @@ def fuzz_cell(object_set: str, n: int, n_actions: int, seed: int) -> dict:
 
 @pytest.mark.slow
 def test_fuzzed_actions_over_every_n_and_object_set():
-    per_cell = max(1, N_ACTIONS // len(CELLS))
+    per_cell = max(1, -(-N_ACTIONS // len(CELLS)))  # at least N_ACTIONS in all (715 x 28 = 20,020)
     start = time.perf_counter()
     ctx = mp.get_context("spawn")
     with ProcessPoolExecutor(max_workers=WORKERS, mp_context=ctx) as pool:
@@ -113,6 +116,6 @@ def test_fuzzed_actions_over_every_n_and_object_set():
         results = [f.result() for f in futures]
     total = {k: sum(r[k] for r in results) for k in results[0]}
     print(f"\nfuzz: {total} in {time.perf_counter() - start:.0f} s on {WORKERS} workers")
-    assert total["actions"] == per_cell * len(CELLS)
+    assert total["actions"] == per_cell * len(CELLS) >= N_ACTIONS
     assert total["bad"] >= total["actions"] // 25
     assert total["resets"] >= 1000
