@@ -22,7 +22,10 @@ Either rule can be given a stage cap, ``max_stage_timesteps``: a stage that has 
 that many env steps is promoted anyway (its steps are listed in ``capped``). It is for stages
 whose gate a policy cannot pass for reasons outside its control, e.g. an env where objects fall
 out in a share of episodes that no policy can avoid, so that a success threshold meant for
-easier settings would hold the curriculum at one N for the rest of the budget.
+easier settings would hold the curriculum at one N for the rest of the budget. The cap bounds the
+last stage too: once N = ``max_value`` has trained ``max_stage_timesteps`` steps the curriculum
+is over (``finished`` holds that step) and the callback stops training, so a capped curriculum has
+a length of its own rather than the wall-clock budget's; a resumed run stops at its first step.
 
 With an ``eval_env`` the greedy checks run under either gate (``greedy_history``, logged as
 ``curriculum/greedy_success``): the learning curve of the policy that will be shipped.
@@ -61,7 +64,8 @@ class CurriculumCallback(BaseCallback):
         the algorithm's ``exploration_timesteps`` makes a stage advance only once ε has decayed,
         so that the success that promotes it is the policy's rather than exploration's.
     :param max_stage_timesteps: env steps after which a stage that has not passed its gate is
-        promoted anyway (0: never, as the paper); at least ``min_stage_timesteps`` when set.
+        promoted anyway (0: never, as the paper); at least ``min_stage_timesteps`` when set. The
+        last stage ends after as many steps, and with it the training (``finished``).
     :param gate: ``"training"`` (the paper's rule) or ``"greedy"`` (see the module docstring).
     :param eval_env: a Gymnasium env (not vectorised) with the ``setter`` method, for greedy checks
         (needed by the greedy gate; optional under the training gate, where they only log).
@@ -126,6 +130,8 @@ class CurriculumCallback(BaseCallback):
         self.history: list[list[int]] = []
         #: Env steps at which a stage was promoted by ``max_stage_timesteps`` rather than its gate.
         self.capped: list[int] = []
+        #: Env step at which the last stage reached ``max_stage_timesteps`` (None: not yet).
+        self.finished: int | None = None
         self._stale = np.zeros(0, dtype=bool)
 
     def _init_callback(self) -> None:
@@ -136,6 +142,7 @@ class CurriculumCallback(BaseCallback):
             self.history = [[int(t), int(n)] for t, n in state["history"]]
             self.greedy_history = [list(h) for h in state.get("greedy_history", [])]
             self.capped = [int(t) for t in state.get("capped", [])]
+            self.finished = None if state.get("finished") is None else int(state["finished"])
             if "eval_rng" in state:
                 self.eval_rng.bit_generator.state = state["eval_rng"]
         else:
@@ -143,6 +150,9 @@ class CurriculumCallback(BaseCallback):
             self.outcomes.clear()
             self.history = [[self.model.num_timesteps, self.value]]
             self.capped = []
+            self.finished = None
+        if self.finished is not None and not self.over():
+            self.finished = None  # resumed with a longer cap: the last stage goes on
         self._stale = np.zeros(self.training_env.num_envs, dtype=bool)
         self._last_check = int(self.greedy_history[-1][0]) if self.greedy_history else self.model.num_timesteps
         self._save_state()
@@ -201,9 +211,24 @@ class CurriculumCallback(BaseCallback):
                       "promoted by the stage cap")
             self._advance()
         self.logger.record("curriculum/num_objects", self.value)
+        if self.over():
+            if self.finished is None:
+                self.finished = self.model.num_timesteps
+                changed = True
+                if self.verbose:
+                    print(f"curriculum: the last stage, N = {self.value}, has trained {self.max_stage_timesteps} "
+                          f"steps; the curriculum is over at step {self.finished}", flush=True)
         if changed:  # _advance saves its own change
             self._save_state()
-        return True
+        return not self.over()
+
+    def over(self) -> bool:
+        """True once the last stage has trained ``max_stage_timesteps`` steps (never without a cap)."""
+        return bool(
+            self.max_stage_timesteps
+            and self.value == self.max_value
+            and self.model.num_timesteps - self.history[-1][0] >= self.max_stage_timesteps
+        )
 
     def _advance(self) -> None:
         self.value += 1
@@ -253,6 +278,7 @@ class CurriculumCallback(BaseCallback):
             "history": [list(h) for h in self.history],
             "greedy_history": [list(h) for h in self.greedy_history],
             "capped": list(self.capped),
+            "finished": self.finished,
             "eval_rng": self.eval_rng.bit_generator.state,
         }
         self.model.curriculum_state = state  # type: ignore[attr-defined]

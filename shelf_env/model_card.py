@@ -92,6 +92,9 @@ def model_card(run: pathlib.Path, zip_path: pathlib.Path, results: pathlib.Path 
         how = "start" if i == 0 else (f"stage cap ({cap} steps)" if step in capped else "greedy gate"
                                       if config["gate"] == "greedy" else "training gate")
         out.append(f"| {n} | {step} | {'-' if minutes is None else f'{minutes:.0f}'} | {how} |")
+    if curriculum.get("finished") is not None:
+        out += ["", f"The curriculum ended at env step {curriculum['finished']}, when N = {curriculum['value']} "
+                f"had trained its {cap} steps (the stage cap bounds the last stage too)."]
     for change in progress.get("amendments", []):
         out += ["", f"Configuration amended from env step {change['timesteps']} (`shelf-train --amend`): "
                 + ", ".join(f"`{k} = {v}`" for k, v in change["changes"].items()) + "."]

@@ -60,15 +60,32 @@ def test_max_stage_timesteps_promotes_a_stage_that_cannot_pass(tmp_path):
     # p_success 0.5 never passes a 90 % gate: only the cap promotes, every 15 steps, up to max_value
     model = PixelDoubleDQN("FCNPolicy", CoinEnv(p_success=0.5), **KW)
     curriculum = CurriculumCallback(window=10, threshold=0.9, max_value=3, max_stage_timesteps=15)
-    model.learn(50, callback=curriculum)
+    model.learn(100, callback=curriculum)
     assert curriculum.history == [[0, 1], [15, 2], [30, 3]]
     assert curriculum.capped == [15, 30] == model.curriculum_state["capped"]
-    # the cap survives save/load: a resumed run knows which stages were capped
+    # the last stage is capped too: after 15 steps at N = 3 the curriculum is over and training stops
+    assert model.num_timesteps == 45 == curriculum.finished == model.curriculum_state["finished"]
+    assert curriculum.over()
+    # the cap survives save/load: a resumed run knows which stages were capped, and that it is over
     model.save(tmp_path / "m.zip")
     loaded = PixelDoubleDQN.load(tmp_path / "m.zip", env=CoinEnv(p_success=0.5))
     resumed = CurriculumCallback(window=10, threshold=0.9, max_value=3, max_stage_timesteps=15)
-    loaded.learn(5, callback=resumed, reset_num_timesteps=False)
+    loaded.learn(50, callback=resumed, reset_num_timesteps=False)
     assert resumed.capped == [15, 30] and resumed.value == 3
+    assert loaded.num_timesteps == 46 and resumed.finished == 45  # stopped at its first step
+    # resumed with a longer cap, the last stage goes on until that cap
+    longer = PixelDoubleDQN.load(tmp_path / "m.zip", env=CoinEnv(p_success=0.5))
+    more = CurriculumCallback(window=10, threshold=0.9, max_value=3, max_stage_timesteps=20)
+    longer.learn(50, callback=more, reset_num_timesteps=False)
+    assert longer.num_timesteps == 50 == more.finished and more.history[-1] == [30, 3]
+
+
+def test_an_uncapped_curriculum_never_ends_training():
+    model = PixelDoubleDQN("FCNPolicy", CoinEnv(p_success=1.0), **KW)
+    curriculum = CurriculumCallback(window=5, max_value=2)
+    model.learn(40, callback=curriculum)
+    assert curriculum.value == 2 and model.num_timesteps == 40
+    assert curriculum.finished is None and not curriculum.over()
 
 
 def test_max_stage_timesteps_leaves_passing_stages_alone():

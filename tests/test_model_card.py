@@ -13,7 +13,7 @@ def fake_run(tmp_path):
     run.mkdir()
     progress = {"wall_seconds": 7200.0, "timesteps": 9000, "episodes": 4, "demo_seconds": 75.0,
                 "config": PRESETS["p_s"].to_dict(),
-                "curriculum": {"value": 3, "history": [[0, 1], [500, 2], [1200, 3]], "capped": [1200],
+                "curriculum": {"value": 3, "history": [[0, 1], [500, 2], [1200, 3]], "capped": [1200], "finished": 9000,
                                "greedy_history": [[1000, 2, 0.9], [1500, 3, 0.85]]},
                 "amendments": [{"timesteps": 1100, "changes": {"max_stage_timesteps": 5000}}],
                 "sessions": [{"machine": "Linux x86_64, 2 CPUs", "torch_threads": 2, "device": "cpu",
@@ -44,6 +44,7 @@ def test_card_has_training_history_and_the_evaluation_beside_other_policies(tmp_
     assert "| 2 | 500 | 10 | greedy gate |" in card and "| 3 | 1200 | 25 | stage cap (5000 steps) |" in card
     assert "amended from env step 1100 (`shelf-train --amend`): `max_stage_timesteps = 5000`" in card
     assert "85 % at N = 3, step 1500" in card
+    assert "curriculum ended at env step 9000, when N = 3 had trained its 5000 steps" in card
     assert "| objects | N | p_s SR % | h-d SR % | p_s AE | p_s mAE |" in card
     assert "| ycb | 3 | 100.0 ± 0.0 | 50.0 ± 0.0 | 0.60 | 0.60 |" in card
 

@@ -91,3 +91,23 @@ def test_amend_changes_a_resumed_runs_curriculum_and_records_when(tmp_path, caps
     # the same amendment again changes nothing and records nothing
     train.main([*common, "--max-steps", "10", "--amend", "max_stage_timesteps=2"])
     assert len(json.loads((tmp_path / "progress.json").read_text())["amendments"]) == 1
+
+
+def test_a_capped_curriculum_ends_the_run_after_its_last_stage(tmp_path, capsys):
+    """max_stage_timesteps caps the last stage too: the run stops there, a resume has nothing to do,
+    and a resume with a longer cap (--amend) trains the last stage on."""
+    common = ["--out", str(tmp_path), "--learning-starts", "2", "--buffer-size", "200", "--widths", "4", "8", "8",
+              "--checkpoint-minutes", "0", "--threads", "1", "--set", "demo_steps=3", "--set", "eval_every=1000",
+              "--set", "start_objects=1", "--set", "max_objects=2", "--max-steps", "50"]
+    assert train.main([*common, "--set", "max_stage_timesteps=2"]) == 0
+    progress = json.loads((tmp_path / "progress.json").read_text())
+    assert progress["timesteps"] == 4 and progress["curriculum"]["finished"] == 4
+    assert progress["curriculum"]["history"] == [[0, 1], [2, 2]]
+    capsys.readouterr()
+    before = (tmp_path / "progress.json").read_text()
+    assert train.main(common) == 0
+    assert "the curriculum is over" in capsys.readouterr().out
+    assert (tmp_path / "progress.json").read_text() == before  # nothing ran, nothing written
+    assert train.main([*common, "--amend", "max_stage_timesteps=5"]) == 0
+    progress = json.loads((tmp_path / "progress.json").read_text())
+    assert progress["timesteps"] == 7 and progress["curriculum"]["finished"] == 7

@@ -294,6 +294,15 @@ def train(args: argparse.Namespace) -> None:
     env = make_env(config)
     if resume:
         model = PixelDoubleDQN.load(args.out / "model.zip", env=env, tensorboard_log=str(args.out / "tb"))
+        state = model.curriculum_state or {}
+        if (  # the curriculum is over (as CurriculumCallback.over, under the possibly amended cap)
+            config.max_stage_timesteps
+            and state.get("value") == config.max_objects
+            and model.num_timesteps - int(state["history"][-1][0]) >= config.max_stage_timesteps
+        ):
+            print(f"the curriculum is over: N = {config.max_objects} trained max_stage_timesteps = "
+                  f"{config.max_stage_timesteps} steps by step {model.num_timesteps}; nothing to do")
+            return
         print(f"resuming at step {model.num_timesteps}, {progress['wall_seconds'] / 60:.1f} min used", flush=True)
         if (args.out / "replay.pkl").exists():
             model.load_replay_buffer(args.out / "replay.pkl")
