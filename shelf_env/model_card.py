@@ -2,6 +2,9 @@
 
     python -m shelf_env.model_card results/training/p_s --zip examples/pretrained/p_s.zip \\
         --results results/models --command "bash scripts/train_model.sh p_s" --out examples/pretrained/p_s.md
+    python -m shelf_env.model_card results/training/p_s results/training/s \\
+        --zip examples/pretrained/p_s.zip examples/pretrained/s.zip --command "..." "..." \\
+        --results results/models --out examples/pretrained/README.md     # both cards in one file
 
 Reads the run's ``progress.json`` (configuration, steps, wall time, the sessions with their
 machines, the curriculum's stages and greedy checks) and ``episodes.csv`` (when each stage was
@@ -110,16 +113,32 @@ def model_card(run: pathlib.Path, zip_path: pathlib.Path, results: pathlib.Path 
     return "\n".join(out) + "\n"
 
 
+def model_cards(models: list[tuple[pathlib.Path, pathlib.Path, str]], results: pathlib.Path | None) -> str:
+    """One model's card, or several under one title (``examples/pretrained/README.md``), headings one level down."""
+    cards = [model_card(run, zip_path, results, command) for run, zip_path, command in models]
+    if len(cards) == 1:
+        return cards[0]
+    names = ", ".join(f"`{zip_path.name}`" for _, zip_path, _ in models)
+    head = (f"# Pretrained models: {names}\n\nEach was trained by the command in its card, on the machines listed, "
+            "and copied here with `bash scripts/ship_models.sh` (which also writes this file).\n")
+    return "\n".join([head, *("\n".join("#" + line if line.startswith("#") else line for line in card.splitlines())
+                               + "\n" for card in cards)])
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("run", type=pathlib.Path, help="the run's folder (or its committed mirror)")
-    p.add_argument("--zip", type=pathlib.Path, required=True, help="the shipped checkpoint")
+    p.add_argument("run", type=pathlib.Path, nargs="+", help="each model's run folder (or its committed mirror)")
+    p.add_argument("--zip", type=pathlib.Path, nargs="+", required=True, help="each run's shipped checkpoint")
     p.add_argument("--results", type=pathlib.Path, default=None, help="an evaluation's output folder")
-    p.add_argument("--command", default="", help="the command that trained the model")
+    p.add_argument("--command", nargs="+", default=None, help="each run's training command")
     p.add_argument("--out", type=pathlib.Path, required=True)
     args = p.parse_args(argv)
+    commands = args.command if args.command is not None else [""] * len(args.run)
     try:
-        text = model_card(args.run, args.zip, args.results, args.command)
+        if not len(args.run) == len(args.zip) == len(commands):
+            raise ValueError(f"need one --zip and one --command per run: {len(args.run)} runs, {len(args.zip)} "
+                             f"zips, {len(commands) if args.command is not None else 'no'} commands")
+        text = model_cards(list(zip(args.run, args.zip, commands)), args.results)
     except (OSError, KeyError, ValueError) as err:
         print(f"model_card: error: {err}", flush=True)
         return 2

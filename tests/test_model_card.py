@@ -59,3 +59,20 @@ def test_cli_writes_the_card_and_refuses_a_results_folder_without_the_model(tmp_
     assert main([str(run), "--zip", str(other), "--results", str(results), "--out", str(tmp_path / "o.md")]) == 2
     assert "has no rows of policy 'other'" in capsys.readouterr().out
     assert not (tmp_path / "o.md").exists()
+
+
+def test_cli_writes_several_cards_under_one_title_and_refuses_unmatched_counts(tmp_path, capsys):
+    run, zip_path, results = fake_run(tmp_path)
+    s_zip = tmp_path / "s.zip"
+    s_zip.write_bytes(b"x" * 1024)
+    out = tmp_path / "README.md"
+    assert main([str(run), str(run), "--zip", str(zip_path), str(s_zip), "--command", "a p_s", "a s",
+                 "--out", str(out)]) == 0
+    text = out.read_text()
+    assert text.startswith("# Pretrained models: `p_s.zip`, `s.zip`")
+    # each card keeps its content, its headings one level down
+    assert "\n## `p_s.zip`: PixelDoubleDQN" in text and "\n## `s.zip`: PixelDoubleDQN" in text
+    assert "\n### Training" in text and "`a s`" in text and text.count("| 2 | 500 | 10 | greedy gate |") == 2
+    assert main([str(run), str(run), "--zip", str(zip_path), "--out", str(tmp_path / "bad.md")]) == 2
+    assert "one --zip and one --command per run: 2 runs, 1 zips" in capsys.readouterr().out
+    assert not (tmp_path / "bad.md").exists()
