@@ -1,0 +1,59 @@
+"""The shipped models in examples/pretrained: each loads alone on a fresh env and acts greedily on a
+held-out scene; on the wrong layout (S on P+S, other cell size) `load` refuses it by name."""
+
+import pathlib
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import shelf_env  # noqa: F401  (registers ShelfSort-v0)
+from sb3_pixeldqn import PixelDoubleDQN
+from shelf_env import evaluation as ev
+from shelf_env.ship import MAX_MB, MODELS
+
+PRETRAINED = pathlib.Path(__file__).resolve().parents[1] / "examples" / "pretrained"
+SHIPPED = sorted(PRETRAINED.glob("*.zip"))
+PRIMITIVES = {"p_s": ("pick", "push"), "s": ("pick",)}
+
+
+def test_what_is_shipped_is_known_and_carded():
+    assert SHIPPED, "no model shipped in examples/pretrained (bash scripts/ship_models.sh)"
+    assert {z.stem for z in SHIPPED} <= set(MODELS)
+    card = (PRETRAINED / "README.md").read_text()
+    for zip_path in SHIPPED:
+        assert f"`{zip_path.name}`: PixelDoubleDQN" in card
+        assert zip_path.stat().st_size <= MAX_MB * 2**20
+
+
+@pytest.mark.parametrize("zip_path", SHIPPED, ids=[z.stem for z in SHIPPED])
+def test_shipped_model_loads_alone_and_acts_greedily_within_the_masks(zip_path):
+    model = PixelDoubleDQN.load(zip_path)  # no env, no other file
+    assert model.curriculum_state["finished"] is not None  # a finished run, not a mid-run checkpoint
+    env = gym.make("ShelfSort-v0", num_objects=3, object_set="ycb", primitives=PRIMITIVES[zip_path.stem],
+                   pixel_size=ev.checkpoint_pixel_size(zip_path))  # the layout the card gives
+    assert model.observation_space == env.observation_space and model.action_space == env.action_space
+    obs, _ = env.reset(seed=ev.scene_seed(7, 3, 0))  # an evaluation scene (SeedSequence seeds, not the training stream)
+    for _ in range(6):
+        masks = env.unwrapped.action_masks()
+        action, _ = model.predict(obs, deterministic=True, action_masks=masks)
+        again, _ = model.predict(obs, deterministic=True, action_masks=masks)
+        action = int(np.asarray(action).reshape(-1)[0])
+        assert action == int(np.asarray(again).reshape(-1)[0]) and masks[action]  # greedy, within the mask
+        obs, reward, terminated, truncated, info = env.step(action)
+        assert reward in (-10.0, -1.0, 0.0) and obs.shape == env.observation_space.shape
+        if terminated or truncated:
+            break
+    env.close()
+
+
+@pytest.mark.parametrize("zip_path", SHIPPED, ids=[z.stem for z in SHIPPED])
+def test_shipped_model_on_the_wrong_layout_is_refused_by_name(zip_path):
+    other = ("pick",) if zip_path.stem == "p_s" else ("pick", "push")
+    size = ev.checkpoint_pixel_size(zip_path)
+    for kwargs in ({"primitives": other, "pixel_size": size},
+                   {"primitives": PRIMITIVES[zip_path.stem], "pixel_size": 2 * size}):
+        env = gym.make("ShelfSort-v0", num_objects=3, **kwargs)
+        with pytest.raises(ValueError, match=f"checkpoint {zip_path} does not fit this env"):
+            PixelDoubleDQN.load(zip_path, env=env)
+        env.close()
