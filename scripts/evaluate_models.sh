@@ -7,10 +7,14 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
+# Models not shipped yet are left out (a note says so); their cells are added when the script runs
+# again after they ship, the other cells being reused.
+shipped=()
 for zip in examples/pretrained/p_s.zip examples/pretrained/s.zip; do
-  [ -f "$zip" ] || { echo "missing $zip: train it first (bash scripts/train_model.sh p_s|s)" >&2; exit 2; }
+  if [ -f "$zip" ]; then shipped+=("$zip"); else echo "note: $zip not shipped yet (train_model.sh, ship_models.sh); left out" >&2; fi
 done
-shelf-evaluate --policies examples/pretrained/p_s.zip examples/pretrained/s.zip h-d h-a --ns 3-14 \
+[ -f examples/pretrained/p_s.zip ] || { echo "missing examples/pretrained/p_s.zip: train and ship it first" >&2; exit 2; }
+shelf-evaluate --policies "${shipped[@]}" h-d h-a --ns 3-14 \
     --runs 30 --seeds 3 --object-sets ycb --out results/models "$@"
 shelf-evaluate --policies examples/pretrained/p_s.zip --ns 3-14 --runs 30 --seeds 3 \
     --object-sets train ycb --out results/models_train_vs_ycb "$@"
