@@ -52,6 +52,16 @@ EVAL_EVERY = 500
 EVAL_EPISODES = 20
 
 
+def curriculum_over(state: dict[str, Any], num_timesteps: int, max_value: int, max_stage_timesteps: int) -> bool:
+    """Whether a saved curriculum ``state`` is over at ``num_timesteps``: its last stage (N =
+    ``max_value``) has trained ``max_stage_timesteps`` steps (never without a cap)."""
+    return bool(
+        max_stage_timesteps
+        and state.get("value") == max_value
+        and num_timesteps - int(state["history"][-1][0]) >= max_stage_timesteps
+    )
+
+
 class CurriculumCallback(BaseCallback):
     """Success-gated curriculum over an env parameter (by default the number of objects).
 
@@ -211,24 +221,21 @@ class CurriculumCallback(BaseCallback):
                       "promoted by the stage cap")
             self._advance()
         self.logger.record("curriculum/num_objects", self.value)
-        if self.over():
-            if self.finished is None:
-                self.finished = self.model.num_timesteps
-                changed = True
-                if self.verbose:
-                    print(f"curriculum: the last stage, N = {self.value}, has trained {self.max_stage_timesteps} "
-                          f"steps; the curriculum is over at step {self.finished}", flush=True)
+        over = self.over()
+        if over and self.finished is None:
+            self.finished = self.model.num_timesteps
+            changed = True
+            if self.verbose:
+                print(f"curriculum: the last stage, N = {self.value}, has trained {self.max_stage_timesteps} "
+                      f"steps; the curriculum is over at step {self.finished}", flush=True)
         if changed:  # _advance saves its own change
             self._save_state()
-        return not self.over()
+        return not over
 
     def over(self) -> bool:
         """True once the last stage has trained ``max_stage_timesteps`` steps (never without a cap)."""
-        return bool(
-            self.max_stage_timesteps
-            and self.value == self.max_value
-            and self.model.num_timesteps - self.history[-1][0] >= self.max_stage_timesteps
-        )
+        state = {"value": self.value, "history": self.history}
+        return curriculum_over(state, self.model.num_timesteps, self.max_value, self.max_stage_timesteps)
 
     def _advance(self) -> None:
         self.value += 1

@@ -14,7 +14,6 @@ from shelf_env.ship import MAX_MB, MODELS
 
 PRETRAINED = pathlib.Path(__file__).resolve().parents[1] / "examples" / "pretrained"
 SHIPPED = sorted(PRETRAINED.glob("*.zip"))
-PRIMITIVES = {"p_s": ("pick", "push"), "s": ("pick",)}
 
 
 def test_what_is_shipped_is_known_and_carded():
@@ -30,7 +29,7 @@ def test_what_is_shipped_is_known_and_carded():
 def test_shipped_model_loads_alone_and_acts_greedily_within_the_masks(zip_path):
     model = PixelDoubleDQN.load(zip_path)  # no env, no other file
     assert model.curriculum_state["finished"] is not None  # a finished run, not a mid-run checkpoint
-    env = gym.make("ShelfSort-v0", num_objects=3, object_set="ycb", primitives=PRIMITIVES[zip_path.stem],
+    env = gym.make("ShelfSort-v0", num_objects=3, object_set="ycb", primitives=ev.checkpoint_primitives(zip_path),
                    pixel_size=ev.checkpoint_pixel_size(zip_path))  # the layout the card gives
     assert model.observation_space == env.observation_space and model.action_space == env.action_space
     obs, _ = env.reset(seed=ev.scene_seed(7, 3, 0))  # an evaluation scene (SeedSequence seeds, not the training stream)
@@ -49,10 +48,10 @@ def test_shipped_model_loads_alone_and_acts_greedily_within_the_masks(zip_path):
 
 @pytest.mark.parametrize("zip_path", SHIPPED, ids=[z.stem for z in SHIPPED])
 def test_shipped_model_on_the_wrong_layout_is_refused_by_name(zip_path):
-    other = ("pick",) if zip_path.stem == "p_s" else ("pick", "push")
+    own = ev.checkpoint_primitives(zip_path)
+    other = ("pick",) if "push" in own else ("pick", "push")
     size = ev.checkpoint_pixel_size(zip_path)
-    for kwargs in ({"primitives": other, "pixel_size": size},
-                   {"primitives": PRIMITIVES[zip_path.stem], "pixel_size": 2 * size}):
+    for kwargs in ({"primitives": other, "pixel_size": size}, {"primitives": own, "pixel_size": 2 * size}):
         env = gym.make("ShelfSort-v0", num_objects=3, **kwargs)
         with pytest.raises(ValueError, match=f"checkpoint {zip_path} does not fit this env"):
             PixelDoubleDQN.load(zip_path, env=env)

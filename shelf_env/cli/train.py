@@ -41,6 +41,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import HindsightRelabelReplayBuffer, PixelDoubleDQN
+from sb3_pixeldqn.callbacks import curriculum_over
 from sb3_pixeldqn.files import copy_atomically, write_json_atomically, write_text_atomically
 from shelf_env.training import (
     PRESETS,
@@ -294,12 +295,9 @@ def train(args: argparse.Namespace) -> None:
     env = make_env(config)
     if resume:
         model = PixelDoubleDQN.load(args.out / "model.zip", env=env, tensorboard_log=str(args.out / "tb"))
-        state = model.curriculum_state or {}
-        if (  # the curriculum is over (as CurriculumCallback.over, under the possibly amended cap)
-            config.max_stage_timesteps
-            and state.get("value") == config.max_objects
-            and model.num_timesteps - int(state["history"][-1][0]) >= config.max_stage_timesteps
-        ):
+        # under the possibly amended cap
+        if curriculum_over(model.curriculum_state or {}, model.num_timesteps, config.max_objects,
+                           config.max_stage_timesteps):
             print(f"the curriculum is over: N = {config.max_objects} trained max_stage_timesteps = "
                   f"{config.max_stage_timesteps} steps by step {model.num_timesteps}; nothing to do")
             return
