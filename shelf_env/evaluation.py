@@ -16,6 +16,8 @@ name before any work starts.
 from __future__ import annotations
 
 import csv
+import functools
+import hashlib
 import inspect
 import json
 import math
@@ -307,9 +309,41 @@ def load_cell(path: pathlib.Path) -> list[EpisodeRecord]:
     return [EpisodeRecord(**r) for r in json.loads(path.read_text())]
 
 
+def fingerprint_path(out: pathlib.Path, policy: str) -> pathlib.Path:
+    """Where ``<out>`` records which checkpoint file its cells of ``policy``'s label came from."""
+    return out / "cells" / f"{policy_label(policy)}.sha256"
+
+
+def check_cell_owner(out: pathlib.Path, policies: list[str], record: bool = False) -> None:
+    """Cells are keyed by the policy's label, a checkpoint's file stem; make sure a label stands for
+    one file. Two checkpoints with one stem in ``policies`` are refused, and so is a checkpoint whose
+    label's cells in ``<out>`` came from another file (a retrained model shipped under the same
+    name): its old cells would otherwise be reused as its results. ``record=True`` writes each
+    checkpoint's sha256 beside its cells (before the first cell is written)."""
+    seen: dict[str, str] = {}
+    for policy in policies:
+        if policy in NAMED_POLICIES:
+            continue
+        label = policy_label(policy)
+        if seen.setdefault(label, policy) != policy:
+            raise ValueError(f"checkpoints {seen[label]} and {policy} share the label {label!r} (the file stem) "
+                             "that names their cells: rename one")
+        digest = hashlib.sha256(pathlib.Path(policy).read_bytes()).hexdigest()
+        path = fingerprint_path(out, policy)
+        if path.exists():
+            before = path.read_text().strip()
+            if before != digest:
+                raise ValueError(f"{out} holds cells of another {label!r} checkpoint (sha256 {before[:12]}; "
+                                 f"{policy} is {digest[:12]}): use another --out, or delete "
+                                 f"{out / 'cells'}/{label}__* and {path.name} to evaluate it afresh")
+        elif record:
+            write_atomically(path, functools.partial(pathlib.Path.write_text, data=digest + "\n"))
+
+
 def cached_cell(out: pathlib.Path, policy: str, num_objects: int, seed: int, runs: int,
                 object_set: str) -> list[EpisodeRecord]:
     """One cell's records from ``<out>/cells/`` if it is there, else evaluated and written there."""
+    check_cell_owner(out, [policy], record=True)
     path = cell_path(out, policy, object_set, num_objects, seed, runs)
     if path.exists():
         return load_cell(path)

@@ -1,5 +1,6 @@
 """The §V protocol: metrics on hand-made records, identical scenes, bad input, the CLI's resume."""
 
+import hashlib
 import json
 import math
 import os
@@ -129,6 +130,35 @@ def test_cli_writes_results_and_resumes(tmp_path, capsys):
     assert (tmp_path / "results.csv").exists() and (tmp_path / "sr_ae_mae_train.png").stat().st_size > 10_000
     assert evaluate_cli.main(argv) == 0
     assert "2 already on disk, 0 to run" in capsys.readouterr().out
+
+
+def test_a_label_stands_for_one_checkpoint_file(tmp_path, capsys):
+    """Cells are named by the checkpoint's stem: another file of that name (a retrained model shipped
+    again) is refused in a folder holding the first one's cells, instead of reusing them; two
+    checkpoints with one stem in one command are refused too."""
+    env = gym.make("ShelfSort-v0", primitives=("pick",))
+    model = PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0)], widths=(4, 8, 8)), seed=0)
+    first, other = tmp_path / "a" / "s.zip", tmp_path / "b" / "s.zip"
+    model.save(first)
+    next(model.policy.parameters()).data += 1.0  # another model under the same file name
+    model.save(other)
+    env.close()
+    out = tmp_path / "eval"
+    grid = ["--ns", "1", "--runs", "1", "--seeds", "1", "--object-sets", "train", "--workers", "1", "--out", str(out)]
+    assert evaluate_cli.main(["--policies", str(first), *grid]) == 0
+    digest = hashlib.sha256(first.read_bytes()).hexdigest()
+    assert (out / "cells" / "s.sha256").read_text().strip() == digest
+    capsys.readouterr()
+    assert evaluate_cli.main(["--policies", str(first), *grid]) == 0  # the same file resumes
+    assert "1 already on disk, 0 to run" in capsys.readouterr().out
+    assert evaluate_cli.main(["--policies", str(other), *grid]) == 2
+    err = capsys.readouterr().err
+    assert "holds cells of another 's' checkpoint" in err and "use another --out" in err
+    assert evaluate_cli.main(["--policies", str(first), str(other), *grid, "--out", str(tmp_path / "x")]) == 2
+    assert "share the label 's'" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="another 's' checkpoint"):
+        ev.cached_cell(out, str(other), 1, 0, 1, "train")
+    assert len(list((out / "cells").glob("*.json"))) == 1  # nothing written for the refused file
 
 
 def test_failure_categories_from_the_trace():

@@ -28,7 +28,9 @@ def test_ray_backend_writes_the_same_cells_as_the_local_backend(tmp_path, monkey
     assert ray.is_initialized() and ray.cluster_resources()["CPU"] == 2
     local = sorted((tmp_path / "local" / "cells").iterdir())
     remote = sorted((tmp_path / "ray" / "cells").iterdir())
-    assert [p.name for p in local] == [p.name for p in remote] and len(local) == 4
+    # 4 cells and the checkpoint's fingerprint (evaluation.check_cell_owner)
+    assert [p.name for p in local] == [p.name for p in remote] and len(local) == 5
+    assert "recipe_n3.sha256" in {p.name for p in local}
     for a, b in zip(local, remote):
         assert a.read_bytes() == b.read_bytes(), a.name
     out = capsys.readouterr().out

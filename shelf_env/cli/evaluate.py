@@ -6,7 +6,9 @@
 Policies: ``h-d``, ``h-a``, ``random`` or a PixelDoubleDQN checkpoint zip (its P+S or S layout
 decides the env's primitives). Every (policy, object set, N, seed) cell runs in a worker process
 and is written to ``<out>/cells/`` as soon as it finishes; running the same command again skips
-the cells already on disk, so an interrupted evaluation resumes. At the end (or with
+the cells already on disk, so an interrupted evaluation resumes. A checkpoint's cells are named
+by its file stem, and ``<out>/cells/<stem>.sha256`` records which file they came from: another file
+of that name (a retrained model shipped again) is refused instead of inheriting them. At the end (or with
 ``--summarize-only``) it writes ``results.csv``, ``results.json`` (with this configuration) and
 ``sr_ae_mae_<set>.png`` (Fig. 10), plus ``train_vs_test.png`` (Fig. 12) when both object sets
 were evaluated.
@@ -202,6 +204,7 @@ def main(argv: list[str] | None = None) -> int:
              **({"closed_loop": True} if args.closed_loop else {}),
              **({"physics": args.physics} if args.physics is not None else {})})
         check_out_conditions(args.out, conditions)
+        ev.check_cell_owner(args.out, args.policies)
     except ValueError as err:
         print(f"shelf-evaluate: error: {err}", file=sys.stderr)
         return 2
@@ -212,8 +215,10 @@ def main(argv: list[str] | None = None) -> int:
     paths = {job: ev.cell_path(args.out, job[0], job[3], job[1], job[2], args.runs) for job in jobs}
     todo = [job for job in jobs if not paths[job].exists()]
     print(f"{len(jobs)} cells, {len(jobs) - len(todo)} already on disk, {len(todo)} to run", flush=True)
-    if todo and not args.summarize_only and conditions and not (args.out / "conditions.json").exists():
-        write_json_atomically(args.out / "conditions.json", conditions)
+    if todo and not args.summarize_only:
+        if conditions and not (args.out / "conditions.json").exists():
+            write_json_atomically(args.out / "conditions.json", conditions)
+        ev.check_cell_owner(args.out, [job[0] for job in todo], record=True)
     if todo and not args.summarize_only:
         start = time.perf_counter()
         if args.backend == "ray":
