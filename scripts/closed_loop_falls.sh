@@ -1,16 +1,25 @@
 #!/usr/bin/env bash
 # Issue 13's fall table: H-a and H-d (and the shipped P+S model when it exists) on N = 3..14 YCB,
-# 20 runs x 2 seeds, open loop vs closed loop, the same scenes. Resumable; extra arguments go to
-# shelf-evaluate.
+# 30 runs x 3 seeds (issue 10's grid), open loop vs closed loop, the same scenes. Resumable; extra
+# arguments go to shelf-evaluate. The open-loop cells are the same episodes as issue 10's
+# evaluation (scripts/evaluate_models.sh, results/models): a cell depends only on (policy, N, seed,
+# runs), so those already there are copied instead of run again.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
 policies=(h-a h-d)
 [ -f examples/pretrained/p_s.zip ] && policies+=(examples/pretrained/p_s.zip)
-shelf-evaluate --policies "${policies[@]}" --ns 3-14 --runs 20 --seeds 2 --object-sets ycb \
+mkdir -p results/closed_loop/off/cells
+for policy in "${policies[@]}"; do
+  label=$(basename "$policy" .zip)
+  for cell in results/models/cells/"$label"__ycb__*__runs30.json results/models/cells/"$label".sha256; do
+    if [ -f "$cell" ]; then cp -n "$cell" results/closed_loop/off/cells/; fi
+  done
+done
+shelf-evaluate --policies "${policies[@]}" --ns 3-14 --runs 30 --seeds 3 --object-sets ycb \
     --out results/closed_loop/off "$@"
-shelf-evaluate --policies "${policies[@]}" --ns 3-14 --runs 20 --seeds 2 --object-sets ycb --closed-loop \
+shelf-evaluate --policies "${policies[@]}" --ns 3-14 --runs 30 --seeds 3 --object-sets ycb --closed-loop \
     --out results/closed_loop/on "$@"
 for metric in fell_rate sr; do
   python examples/plot_conditions.py --metric $metric --x n --runs results/closed_loop/off:off \
