@@ -18,3 +18,5 @@ shelf-evaluate --policies "${shipped[@]}" h-d h-a --ns 3-14 \
     --runs 30 --seeds 3 --object-sets ycb --out results/models "$@"
 shelf-evaluate --policies examples/pretrained/p_s.zip --ns 3-14 --runs 30 --seeds 3 \
     --object-sets train ycb --out results/models_train_vs_ycb "$@"
+# The verdict against issue 10's targets (results/models/report.md: table, margins, failures).
+python -m shelf_env.report results/models
