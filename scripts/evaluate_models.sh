@@ -20,3 +20,6 @@ shelf-evaluate --policies examples/pretrained/p_s.zip --ns 3-14 --runs 30 --seed
     --object-sets train ycb --out results/models_train_vs_ycb "$@"
 # The verdict against issue 10's targets (results/models/report.md: table, margins, failures).
 python -m shelf_env.report results/models
+# Where the falls come from: up to 10 fallen episodes per (policy, N) replayed with the motion's
+# phases watched (results/models/falls.md, traces.jsonl).
+python -m shelf_env.traces results/models --policies "${shipped[@]}" h-d h-a --ns 3 5 8 11 14 --limit 10

@@ -1,0 +1,201 @@
+"""Why evaluation episodes failed, from replayed traces: which motion made an object leave the cabinet.
+
+    python -m shelf_env.traces results/models --policies examples/pretrained/p_s.zip h-d --ns 8 14
+
+Evaluation episodes are history-free (`shelf_env.env`): episode ``run`` of a cell starts from
+`evaluation.scene_seed` and a greedy policy acts deterministically, so any episode of a
+``shelf-evaluate`` folder can be replayed exactly. This module replays the folder's failed episodes
+(those whose cell records ``failure == "fell"`` by default) and watches the world between the
+phases of each action, which the evaluation's records do not:
+
+- ``pick``: descend, grip, lift and carry the held object out of the opening;
+- ``place``: carry it back in, lower, release and retreat;
+- ``push``: the whole straight push and retreat;
+- ``settle``: the world settling after the arm has gone.
+
+For every object that left the cabinet it reports the phase after which it was first outside and
+whether it was the object in the cup (a neighbour dragged out by the pick's carry is the case of
+§V-d and of issue 13's closed loop). It writes ``<folder>/traces.jsonl`` (one line per replayed
+episode) and ``<folder>/falls.md`` (counts per policy and N), and says when a replay does not
+reproduce its record (it would mean the episode was not history-free).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+from collections import Counter
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sb3_pixeldqn.files import write_atomically
+from shelf_env import evaluation as ev
+from shelf_env import params
+
+#: The phases a fall is attributed to, in the order they happen within an action.
+PHASES = ("pick", "place", "push", "settle")
+
+
+def _outside(world: Any) -> set[int]:
+    """Uids of the objects that are not in the cabinet's interior box now."""
+    if not world.objects:
+        return set()
+    inside = world.inside(world.positions())
+    return {o.uid for o, ok in zip(world.objects, inside) if not ok}
+
+
+class PhaseWatch:
+    """Wraps an env's primitives to note, after each phase, which objects are outside the cabinet.
+
+    The held object is outside by design at the end of the pick (the carry ends in front of the
+    opening), so it is only counted as fallen if it is still outside after ``place``. Attach it
+    after ``reset`` / ``set_scene``: they rebuild the world and the primitives."""
+
+    def __init__(self, env: gym.Env):
+        base: Any = env.unwrapped  # a ShelfSortEnv
+        self.world = base.world
+        self.runner = base.primitive_runner
+        self.first_out: dict[int, str] = {}
+        self.held: int | None = None
+        pick, place, push = self.runner.pick, self.runner.place, self.runner.push
+
+        def watched_pick(*args: Any, **kwargs: Any) -> Any:
+            grasp = pick(*args, **kwargs)
+            self.held = None if grasp is None else grasp.uid
+            self._note("pick", exclude=self.held)
+            return grasp
+
+        def watched_place(*args: Any, **kwargs: Any) -> Any:
+            result = place(*args, **kwargs)
+            self._note("place")
+            return result
+
+        def watched_push(*args: Any, **kwargs: Any) -> Any:
+            result = push(*args, **kwargs)
+            self._note("push")
+            return result
+
+        self.runner.pick, self.runner.place, self.runner.push = watched_pick, watched_place, watched_push
+
+    def _note(self, phase: str, exclude: int | None = None) -> None:
+        for uid in _outside(self.world) - {exclude}:
+            self.first_out.setdefault(uid, phase)
+
+    def begin_action(self) -> None:
+        self.first_out, self.held = {}, None
+
+    def end_action(self, uids_before: set[int]) -> list[dict[str, Any]]:
+        """The objects that left the cabinet during the action just taken (the env removes them
+        when it judges the step, so they are those of ``uids_before`` no longer in the world)."""
+        gone = uids_before - {o.uid for o in self.world.objects}
+        return [{"uid": uid, "phase": self.first_out.get(uid, "settle"), "held": uid == self.held}
+                for uid in sorted(gone)]
+
+
+def replay(policy: str, num_objects: int, seed: int, run: int, object_set: str = "ycb") -> dict[str, Any]:
+    """Replay one evaluation episode (the same env, scene and greedy policy as `evaluation.evaluate_cell`)
+    and return its trace: per action the primitive, and the objects that left the cabinet with the
+    phase and whether it was held."""
+    primitives = ev.check_policy(policy)
+    env = gym.make("ShelfSort-v0", num_objects=num_objects, object_set=object_set, primitives=primitives,
+                   max_actions=params.MAX_ACTIONS, pixel_size=ev.policy_pixel_size(policy))
+    try:
+        agent = ev.make_policy(policy, env, seed=ev.scene_seed(seed, num_objects, 10**6))
+        obs, info = env.reset(seed=ev.scene_seed(seed, num_objects, run))
+        watch = PhaseWatch(env)
+        masked = ev.takes_action_masks(agent)
+        steps = []
+        while True:
+            kwargs = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
+            action, _ = agent.predict(obs, deterministic=True, **kwargs)
+            action = int(np.asarray(action).reshape(-1)[0])
+            before = {o.uid for o in watch.world.objects}
+            watch.begin_action()
+            obs, _, terminated, truncated, info = env.step(action)
+            steps.append({"primitive": info["primitive"], "fell": watch.end_action(before)})
+            if terminated or truncated:
+                break
+        actions = int(info["action_count"])
+        return {"policy": ev.policy_label(policy), "object_set": object_set, "num_objects": num_objects,
+                "seed": seed, "run": run, "success": bool(info["is_success"]) and actions < params.MAX_ACTIONS,
+                "fell": bool(info["fell"]), "actions": actions, "steps": steps}
+    finally:
+        env.close()
+
+
+def fall_counts(traces: list[dict[str, Any]]) -> Counter:
+    """``{(policy, N, cause): objects}`` with cause ``"<phase>, held"`` or ``"<phase>, neighbour"``."""
+    counts: Counter = Counter()
+    for t in traces:
+        for step in t["steps"]:
+            for f in step["fell"]:
+                cause = f"{f['phase']}, {'held' if f['held'] else 'neighbour'}"
+                counts[(t["policy"], t["num_objects"], cause)] += 1
+    return counts
+
+
+def falls_table(traces: list[dict[str, Any]]) -> str:
+    """Markdown: objects that left the cabinet per (policy, N), by phase and held/neighbour."""
+    counts = fall_counts(traces)
+    causes = sorted({c for _, _, c in counts}, key=lambda c: (PHASES.index(c.split(",")[0]), c))
+    episodes = Counter((t["policy"], t["num_objects"]) for t in traces)
+    lines = ["| policy | N | episodes replayed | " + " | ".join(causes) + " |",
+             "|---|---|---|" + "---|" * len(causes)]
+    for policy, n in sorted(episodes):
+        lines.append(f"| {policy} | {n} | {episodes[(policy, n)]} | "
+                     + " | ".join(str(counts.get((policy, n, c), 0)) for c in causes) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m shelf_env.traces", description=__doc__.split("\n\n")[0])
+    parser.add_argument("folder", type=pathlib.Path, help="a shelf-evaluate --out folder (its cells are replayed)")
+    parser.add_argument("--policies", nargs="+", required=True, help="as given to shelf-evaluate (names or zips)")
+    parser.add_argument("--ns", nargs="+", type=int, required=True)
+    parser.add_argument("--failure", default="fell", choices=ev.FAILURES, help="which failed episodes to replay")
+    parser.add_argument("--limit", type=int, default=0, help="at most this many episodes per (policy, N); 0: all")
+    args = parser.parse_args(argv)
+    try:
+        for policy in args.policies:
+            ev.check_policy(policy)
+        ev.check_ns(args.ns)
+        ev.check_cell_owner(args.folder, args.policies)
+        cells = sorted((args.folder / "cells").glob("*.json"))
+        if not cells:
+            raise ValueError(f"{args.folder}/cells has no evaluation cells")
+    except ValueError as err:
+        print(f"traces: error: {err}", file=sys.stderr)
+        return 2
+    by_label = {ev.policy_label(p): p for p in args.policies}
+    chosen: dict[tuple[str, int], list[ev.EpisodeRecord]] = {}
+    for path in cells:
+        for r in ev.load_cell(path):
+            if r.policy in by_label and r.num_objects in args.ns and r.failure == args.failure:
+                chosen.setdefault((r.policy, r.num_objects), []).append(r)
+    traces, mismatches = [], 0
+    for (label, n), records in sorted(chosen.items()):
+        for r in records[: args.limit or None]:
+            trace = replay(by_label[label], n, r.seed, r.run, r.object_set)
+            if (trace["fell"], trace["actions"], trace["success"]) != (r.fell, r.actions, r.success):
+                mismatches += 1
+                trace["mismatch"] = {"recorded": {"fell": r.fell, "actions": r.actions, "success": r.success}}
+            traces.append(trace)
+            print(f"{label} N={n} seed {r.seed} run {r.run}: "
+                  + "; ".join(f"{f['phase']} ({'held' if f['held'] else 'neighbour'})"
+                              for s in trace["steps"] for f in s["fell"]), flush=True)
+    write_atomically(args.folder / "traces.jsonl",
+                     lambda tmp: tmp.write_text("".join(json.dumps(t) + "\n" for t in traces)))
+    table = falls_table(traces)
+    write_atomically(args.folder / "falls.md", lambda tmp: tmp.write_text(table))
+    print(table, end="")
+    if mismatches:
+        print(f"warning: {mismatches} replays did not reproduce their records", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,62 @@
+"""Fall traces (shelf_env.traces): the phase and the object a fall comes from, on a crafted drag and
+on a replayed evaluation episode that must reproduce its record."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+
+from shelf_env import evaluation as ev
+from shelf_env import traces
+from tests.conftest import REGIONS
+from tests.test_closed_loop import CLEAN_SCENE, DRAG_SCENE
+
+# An evaluation episode where H-d's first action drops an object out of the cabinet (found in
+# scripts/evaluate_models.sh's cells: h-d, YCB, N = 3, seed 2, run 16: 1 action, fell).
+FELL = ev.EpisodeRecord("h-d", "ycb", 3, 2, 16, success=False, actions=1, num_unsorted_initial=1, fell=True,
+                        noops=0, failure="fell", max_repeat=1)
+
+
+def watched_pick(scene):
+    env = gym.make("ShelfSort-v0", num_objects=2)
+    try:
+        env.reset(seed=0)
+        env.unwrapped.set_scene(scene, REGIONS)
+        watch = traces.PhaseWatch(env)
+        before = {o.uid for o in watch.world.objects}
+        front = watch.world.objects[int(watch.world.positions()[:, 0].argmin())].uid  # nearest the opening
+        watch.begin_action()
+        _, _, _, _, info = env.step(env.unwrapped.codec.action_at("pick", 0.30, 0.0))
+        return info, watch.end_action(before), front
+    finally:
+        env.close()
+
+
+def test_a_neighbour_dragged_out_by_the_pick_is_traced_to_the_pick():
+    info, fell, front = watched_pick(DRAG_SCENE)
+    assert info["fell"] and fell == [{"uid": front, "phase": "pick", "held": False}]
+    info, fell, _ = watched_pick(CLEAN_SCENE)
+    assert not info["fell"] and fell == []
+
+
+def test_replayed_fall_reproduces_its_record_and_is_tabled(tmp_path, capsys):
+    ev.save_cell(ev.cell_path(tmp_path, "h-d", "ycb", 3, 2, 1), [FELL])
+    assert traces.main([str(tmp_path), "--policies", "h-d", "--ns", "3"]) == 0
+    out = capsys.readouterr()
+    assert "did not reproduce" not in out.err
+    (trace,) = [json.loads(line) for line in (tmp_path / "traces.jsonl").read_text().splitlines()]
+    assert (trace["fell"], trace["actions"], trace["success"]) == (True, 1, False) and "mismatch" not in trace
+    (step,) = trace["steps"]
+    assert step["primitive"] == "pick" and len(step["fell"]) >= 1
+    assert all(f["phase"] in traces.PHASES for f in step["fell"])
+    table = (tmp_path / "falls.md").read_text()
+    assert table.startswith("| policy | N | episodes replayed |") and "| h-d | 3 | 1 |" in table
+    assert sum(traces.fall_counts([trace]).values()) == len(step["fell"])
+
+
+def test_bad_input_is_one_line(tmp_path, capsys):
+    assert traces.main([str(tmp_path), "--policies", "h-d", "--ns", "3"]) == 2
+    assert "has no evaluation cells" in capsys.readouterr().err
+    assert traces.main([str(tmp_path), "--policies", "nope.zip", "--ns", "3"]) == 2
+    assert "nope.zip" in capsys.readouterr().err
