@@ -16,6 +16,12 @@ done
 [ -f examples/pretrained/p_s.zip ] || { echo "missing examples/pretrained/p_s.zip: train and ship it first" >&2; exit 2; }
 shelf-evaluate --policies "${shipped[@]}" h-d h-a --ns 3-14 \
     --runs 30 --seeds 3 --object-sets ycb --out results/models "$@"
+# Fig. 12: P+S on the training objects beside YCB; its YCB cells are the ones above (a cell depends
+# only on (policy, N, seed, runs)), copied rather than run twice.
+mkdir -p results/models_train_vs_ycb/cells
+for cell in results/models/cells/p_s__ycb__*__runs30.json results/models/cells/p_s.sha256; do
+  if [ -f "$cell" ]; then cp -n "$cell" results/models_train_vs_ycb/cells/; fi
+done
 shelf-evaluate --policies examples/pretrained/p_s.zip --ns 3-14 --runs 30 --seeds 3 \
     --object-sets train ycb --out results/models_train_vs_ycb "$@"
 # The verdict against issue 10's targets (results/models/report.md: table, margins, failures).

@@ -68,13 +68,18 @@ def _mean(values: Sequence[float]) -> float:
 def report(rows: dict[tuple[str, int], dict[str, float]], learned: str = "p_s", pick_only: str = "s",
            heuristics: Sequence[str] = ("h-d", "h-a"), title: str = "") -> str:
     """The markdown report (table and targets) of ``learned`` against ``heuristics`` and ``pick_only``."""
-    ns = sorted({n for p, n in rows if p == learned})
-    if not ns:
+    own = sorted({n for p, n in rows if p == learned})
+    if not own:
         raise ValueError(f"no results of the learned policy {learned!r} (policies: "
                          f"{sorted({p for p, _ in rows})})")
     missing = [h for h in heuristics if not any(p == h for p, _ in rows)]
     if missing:
         raise ValueError(f"no results of the heuristics {missing}: the targets compare against them")
+    # the targets are judged where every compared policy has results (an evaluation in progress)
+    ns = [n for n in own if all((h, n) in rows for h in heuristics)]
+    pending = [n for n in own if n not in ns]
+    if not ns:
+        raise ValueError(f"no N where {learned} and every heuristic {list(heuristics)} have results")
 
     def get(policy: str, n: int, key: str) -> float:
         return rows.get((policy, n), {}).get(key, math.nan)
@@ -82,7 +87,7 @@ def report(rows: dict[tuple[str, int], dict[str, float]], learned: str = "p_s", 
     policies = [learned, pick_only, *heuristics]
     lines = [f"## {title}" if title else "", "",
              "| N | " + " | ".join(f"{p} SR %" for p in policies)
-             + f" | best heuristic | {learned} − best | {learned} AE | best heuristic's AE"
+             + f" | best heuristic | {learned} − best | {learned} AE | heuristics' best AE"
              + f" | {learned} fell % | {learned} failures (" + ", ".join(FAILURES) + ") % |",
              "|---|" + "---|" * (len(policies) + 6)]
     margins, misses, ae_pairs = [], [], []
@@ -102,7 +107,9 @@ def report(rows: dict[tuple[str, int], dict[str, float]], learned: str = "p_s", 
         lines.append(f"| {n} | {srs} | {best} | {margin:+.1f} | {_fmt(ae, 2)} | {_fmt(best_ae, 2)} | "
                      f"{_fmt(100 * get(learned, n, 'fell_rate'), 0)} | {failures} |")
     avg_margin = _mean(margins)
-    lines += ["", "Targets (issue 10, §V):", ""]
+    if pending:
+        lines += ["", f"Not judged yet (the heuristics have no results there): N = {', '.join(map(str, pending))}."]
+    lines += ["", f"Targets (issue 10, §V), over N = {', '.join(map(str, ns))}:", ""]
     lines.append(f"- {learned} ≥ best heuristic at every N: "
                  + ("met" if not misses else f"**missed** at N = {', '.join(map(str, misses))}"))
     lines.append(f"- {learned} − best heuristic averaged over N = {ns[0]}..{ns[-1]}: {avg_margin:+.1f} SR points "

@@ -189,8 +189,10 @@ def main(argv: list[str] | None = None) -> int:
                               for s in trace["steps"] for f in s["fell"]), flush=True)
     write_atomically(args.folder / "traces.jsonl",
                      lambda tmp: tmp.write_text("".join(json.dumps(t) + "\n" for t in traces)))
+    command = " ".join(["python -m shelf_env.traces", *(sys.argv[1:] if argv is None else argv)])
     table = falls_table(traces)
-    write_atomically(args.folder / "falls.md", lambda tmp: tmp.write_text(table))
+    write_atomically(args.folder / "falls.md",
+                     lambda tmp: tmp.write_text(f"Objects that left the cabinet, by phase (`{command}`):\n\n{table}"))
     print(table, end="")
     if mismatches:
         print(f"warning: {mismatches} replays did not reproduce their records", file=sys.stderr)

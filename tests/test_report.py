@@ -45,13 +45,16 @@ def test_margins_and_misses_are_computed_per_n(tmp_path):
 
 
 def test_the_targets_met_and_s_not_evaluated(tmp_path):
-    write(tmp_path, [("p_s", n, 95, 1.5, 0.0) for n in (3, 4)]
-          + [(h, n, 50, 1.0, 0.3) for h in ("h-d", "h-a") for n in (3, 4)])
+    write(tmp_path, [("p_s", n, 95, 1.5, 0.0) for n in (3, 4, 5)]
+          + [(h, n, 50, 1.0, 0.3) for h in ("h-d", "h-a") for n in (3, 4)] + [("h-d", 5, 99, 1.0, 0.0)])
     assert rp.main([str(tmp_path), "--out", str(tmp_path / "r.md")]) == 0
     text = (tmp_path / "r.md").read_text()
     assert "at every N: met" in text and "+45.0 SR points (target ≥ +30: met)" in text
     assert "not evaluated (s has no results)" in text and "(met)" in text
     assert "| 3 | 95.0 ± 1.0 | - | 50.0 ± 1.0 |" in text
+    # N = 5 lacks h-a (an evaluation in progress): shown as pending, not judged
+    assert "| 5 |" not in text and "Not judged yet (the heuristics have no results there): N = 5." in text
+    assert "over N = 3, 4:" in text
 
 
 def test_bad_input_is_one_line(tmp_path, capsys):

@@ -51,7 +51,9 @@ def test_replayed_fall_reproduces_its_record_and_is_tabled(tmp_path, capsys):
     assert step["primitive"] == "pick" and len(step["fell"]) >= 1
     assert all(f["phase"] in traces.PHASES for f in step["fell"])
     table = (tmp_path / "falls.md").read_text()
-    assert table.startswith("| policy | N | episodes replayed |") and "| h-d | 3 | 1 |" in table
+    assert table.startswith(f"Objects that left the cabinet, by phase (`python -m shelf_env.traces {tmp_path} "
+                            "--policies h-d --ns 3`):")
+    assert "| policy | N | episodes replayed |" in table and "| h-d | 3 | 1 |" in table
     assert sum(traces.fall_counts([trace]).values()) == len(step["fell"])
 
 
