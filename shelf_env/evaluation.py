@@ -228,14 +228,21 @@ def check_conditions(conditions: dict[str, Any] | None) -> dict[str, Any]:
     return conditions
 
 
+def make_env(policy: str, num_objects: int, object_set: str = "ycb", primitives: tuple[str, ...] | None = None,
+             conditions: dict[str, Any] | None = None) -> gym.Env:
+    """The env an evaluation cell of ``policy`` runs in (its layout and cell size, the protocol's
+    action limit, ``conditions``)."""
+    return gym.make("ShelfSort-v0", num_objects=num_objects, object_set=object_set,
+                    primitives=check_policy(policy, primitives), max_actions=params.MAX_ACTIONS,
+                    pixel_size=policy_pixel_size(policy), **check_conditions(conditions))
+
+
 def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_set: str = "ycb",
                   primitives: tuple[str, ...] | None = None,
                   conditions: dict[str, Any] | None = None) -> list[EpisodeRecord]:
     """All ``runs`` episodes of one (policy, N, seed) cell, under ``conditions`` (env options such
     as perception noise or the closed loop; `CONDITION_KEYS`)."""
-    primitives = check_policy(policy, primitives)
-    env = gym.make("ShelfSort-v0", num_objects=num_objects, object_set=object_set, primitives=primitives,
-                   max_actions=params.MAX_ACTIONS, pixel_size=policy_pixel_size(policy), **check_conditions(conditions))
+    env = make_env(policy, num_objects, object_set, primitives, conditions)
     try:
         agent = make_policy(policy, env, seed=scene_seed(seed, num_objects, 10**6))  # its own stream
         return [

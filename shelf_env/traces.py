@@ -30,11 +30,9 @@ from collections import Counter
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
 from sb3_pixeldqn.files import write_atomically
 from shelf_env import evaluation as ev
-from shelf_env import params
 
 #: The phases a fall is attributed to, in the order they happen within an action.
 PHASES = ("pick", "place", "push", "settle")
@@ -96,33 +94,41 @@ class PhaseWatch:
                 for uid in sorted(gone)]
 
 
+class FallTrace(gym.Wrapper):
+    """An env that records, per action, its primitive and the objects that left the cabinet
+    (`PhaseWatch.end_action`) in ``steps``; each ``reset`` starts a new trace on the new world."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        self.steps: list[dict[str, Any]] = []
+        self.watch: PhaseWatch | None = None
+
+    def reset(self, **kwargs: Any) -> Any:
+        result = self.env.reset(**kwargs)
+        self.watch, self.steps = PhaseWatch(self.env), []  # after reset: it rebuilt the world
+        return result
+
+    def step(self, action: Any) -> Any:
+        if self.watch is None:
+            raise RuntimeError("call reset() before step()")
+        before = {o.uid for o in self.watch.world.objects}
+        self.watch.begin_action()
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.steps.append({"primitive": info["primitive"], "fell": self.watch.end_action(before)})
+        return obs, reward, terminated, truncated, info
+
+
 def replay(policy: str, num_objects: int, seed: int, run: int, object_set: str = "ycb") -> dict[str, Any]:
-    """Replay one evaluation episode (the same env, scene and greedy policy as `evaluation.evaluate_cell`)
-    and return its trace: per action the primitive, and the objects that left the cabinet with the
-    phase and whether it was held."""
-    primitives = ev.check_policy(policy)
-    env = gym.make("ShelfSort-v0", num_objects=num_objects, object_set=object_set, primitives=primitives,
-                   max_actions=params.MAX_ACTIONS, pixel_size=ev.policy_pixel_size(policy))
+    """Replay one evaluation episode (the env, scene, greedy policy and rollout of
+    `evaluation.evaluate_cell`) and return its record's outcome with its trace: per action the
+    primitive, and the objects that left the cabinet with the phase and whether it was held."""
+    env = FallTrace(ev.make_env(policy, num_objects, object_set))
     try:
         agent = ev.make_policy(policy, env, seed=ev.scene_seed(seed, num_objects, 10**6))
-        obs, info = env.reset(seed=ev.scene_seed(seed, num_objects, run))
-        watch = PhaseWatch(env)
-        masked = ev.takes_action_masks(agent)
-        steps = []
-        while True:
-            kwargs = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
-            action, _ = agent.predict(obs, deterministic=True, **kwargs)
-            action = int(np.asarray(action).reshape(-1)[0])
-            before = {o.uid for o in watch.world.objects}
-            watch.begin_action()
-            obs, _, terminated, truncated, info = env.step(action)
-            steps.append({"primitive": info["primitive"], "fell": watch.end_action(before)})
-            if terminated or truncated:
-                break
-        actions = int(info["action_count"])
+        outcome = ev.run_episode(env, agent, ev.scene_seed(seed, num_objects, run))
         return {"policy": ev.policy_label(policy), "object_set": object_set, "num_objects": num_objects,
-                "seed": seed, "run": run, "success": bool(info["is_success"]) and actions < params.MAX_ACTIONS,
-                "fell": bool(info["fell"]), "actions": actions, "steps": steps}
+                "seed": seed, "run": run, "success": outcome["success"], "fell": outcome["fell"],
+                "actions": outcome["actions"], "steps": env.steps}
     finally:
         env.close()
 

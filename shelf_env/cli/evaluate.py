@@ -219,7 +219,6 @@ def main(argv: list[str] | None = None) -> int:
         if conditions and not (args.out / "conditions.json").exists():
             write_json_atomically(args.out / "conditions.json", conditions)
         ev.check_cell_owner(args.out, [job[0] for job in todo], record=True)
-    if todo and not args.summarize_only:
         start = time.perf_counter()
         if args.backend == "ray":
             try:
