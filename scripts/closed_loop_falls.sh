@@ -3,22 +3,17 @@
 # 30 runs x 3 seeds (issue 10's grid), open loop vs closed loop, the same scenes. Resumable; extra
 # arguments go to shelf-evaluate. The open-loop cells are the same episodes as issue 10's
 # evaluation (scripts/evaluate_models.sh, results/models): a cell depends only on (policy, N, seed,
-# runs), so those already there are copied instead of run again.
+# runs), so those already there are copied (--reuse-cells) instead of run again.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
 policies=(h-a h-d)
 [ -f examples/pretrained/p_s.zip ] && policies+=(examples/pretrained/p_s.zip)
-mkdir -p results/closed_loop/off/cells
-for policy in "${policies[@]}"; do
-  label=$(basename "$policy" .zip)
-  for cell in results/models/cells/"$label"__ycb__*__runs30.json results/models/cells/"$label".sha256; do
-    if [ -f "$cell" ]; then cp -n "$cell" results/closed_loop/off/cells/; fi
-  done
-done
+reuse=()
+[ -d results/models/cells ] && reuse=(--reuse-cells results/models)
 shelf-evaluate --policies "${policies[@]}" --ns 3-14 --runs 30 --seeds 3 --object-sets ycb \
-    --out results/closed_loop/off "$@"
+    --out results/closed_loop/off "${reuse[@]}" "$@"
 shelf-evaluate --policies "${policies[@]}" --ns 3-14 --runs 30 --seeds 3 --object-sets ycb --closed-loop \
     --out results/closed_loop/on "$@"
 for metric in fell_rate sr; do

@@ -16,14 +16,10 @@ done
 [ -f examples/pretrained/p_s.zip ] || { echo "missing examples/pretrained/p_s.zip: train and ship it first" >&2; exit 2; }
 shelf-evaluate --policies "${shipped[@]}" h-d h-a --ns 3-14 \
     --runs 30 --seeds 3 --object-sets ycb --out results/models "$@"
-# Fig. 12: P+S on the training objects beside YCB; its YCB cells are the ones above (a cell depends
-# only on (policy, N, seed, runs)), copied rather than run twice.
-mkdir -p results/models_train_vs_ycb/cells
-for cell in results/models/cells/p_s__ycb__*__runs30.json results/models/cells/p_s.sha256; do
-  if [ -f "$cell" ]; then cp -n "$cell" results/models_train_vs_ycb/cells/; fi
-done
+# Fig. 12: P+S on the training objects beside YCB; its YCB cells are the ones above, copied
+# (--reuse-cells) rather than run twice.
 shelf-evaluate --policies examples/pretrained/p_s.zip --ns 3-14 --runs 30 --seeds 3 \
-    --object-sets train ycb --out results/models_train_vs_ycb "$@"
+    --object-sets train ycb --out results/models_train_vs_ycb --reuse-cells results/models "$@"
 # The verdict against issue 10's targets (results/models/report.md: table, margins, failures).
 python -m shelf_env.report results/models
 # Where the falls come from: up to 10 fallen episodes per (policy, N) replayed with the motion's

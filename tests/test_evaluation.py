@@ -161,6 +161,28 @@ def test_a_label_stands_for_one_checkpoint_file(tmp_path, capsys):
     assert len(list((out / "cells").glob("*.json"))) == 1  # nothing written for the refused file
 
 
+def test_reuse_cells_copies_the_same_episodes_from_another_folder(tmp_path, capsys):
+    grid = ["--policies", "h-d", "--ns", "1", "--runs", "1", "--seeds", "1", "--workers", "1"]
+    first, second = tmp_path / "first", tmp_path / "second"
+    assert evaluate_cli.main([*grid, "--object-sets", "ycb", "--out", str(first)]) == 0
+    capsys.readouterr()
+    assert evaluate_cli.main([*grid, "--object-sets", "train", "ycb", "--out", str(second),
+                              "--reuse-cells", str(first)]) == 0
+    out = capsys.readouterr().out
+    assert "2 cells, 0 already on disk, 2 to run" in out and f"1 cells copied from {first}, 1 to run" in out
+    name = ev.cell_path(first, "h-d", "ycb", 1, 0, 1).name
+    assert (second / "cells" / name).read_bytes() == (first / "cells" / name).read_bytes()
+    assert ev.cell_path(second, "h-d", "train", 1, 0, 1).exists()  # the rest was run
+    # a folder made under other conditions holds other episodes: refused before any work
+    (first / "conditions.json").write_text('{"closed_loop": true}')
+    third = tmp_path / "third"
+    assert evaluate_cli.main([*grid, "--out", str(third), "--reuse-cells", str(first)]) == 2
+    assert "holds cells evaluated under conditions {'closed_loop': True}, not none" in capsys.readouterr().err
+    assert not third.exists()
+    assert evaluate_cli.main([*grid, "--out", str(third), "--reuse-cells", str(tmp_path / "nowhere")]) == 2
+    assert "has no cells/ folder" in capsys.readouterr().err
+
+
 def test_failure_categories_from_the_trace():
     c = ev.classify_failure
     assert c(True, False, True, 3, 0, 1, False) == ""

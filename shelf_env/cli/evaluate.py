@@ -8,7 +8,9 @@ decides the env's primitives). Every (policy, object set, N, seed) cell runs in 
 and is written to ``<out>/cells/`` as soon as it finishes; running the same command again skips
 the cells already on disk, so an interrupted evaluation resumes. A checkpoint's cells are named
 by its file stem, and ``<out>/cells/<stem>.sha256`` records which file they came from: another file
-of that name (a retrained model shipped again) is refused instead of inheriting them. At the end (or with
+of that name (a retrained model shipped again) is refused instead of inheriting them.
+``--reuse-cells FOLDER`` copies the grid's cells that another folder, evaluated under the same
+conditions (and from the same checkpoint files), already holds. At the end (or with
 ``--summarize-only``) it writes ``results.csv``, ``results.json`` (with this configuration) and
 ``sr_ae_mae_<set>.png`` (Fig. 10), plus ``train_vs_test.png`` (Fig. 12) when both object sets
 were evaluated.
@@ -36,7 +38,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from sb3_pixeldqn.files import write_json_atomically
+from sb3_pixeldqn.files import copy_atomically, write_json_atomically
 from shelf_env import evaluation as ev
 
 #: A cell: (policy, N, seed, object set).
@@ -77,6 +79,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--out", type=pathlib.Path, required=True)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--summarize-only", action="store_true", help="only aggregate the cells already on disk")
+    p.add_argument("--reuse-cells", type=pathlib.Path, default=None, metavar="FOLDER",
+                   help="copy this grid's cells from another evaluation folder made under the same conditions "
+                        "(and, for checkpoints, from the same file) instead of running them again")
     p.add_argument("--perception-noise", type=json_object, default=None, metavar="JSON",
                    help='evaluate under perception noise, e.g. \'{"dropout": 0.1, "class_flip": 0.05}\'')
     p.add_argument("--closed-loop", action="store_true", help="evaluate with closed-loop primitives")
@@ -170,6 +175,34 @@ def run_ray(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, workers:
             bar.update()
 
 
+def check_reuse(source: pathlib.Path, policies: list[str], conditions: dict) -> None:
+    """``--reuse-cells``: ``source`` must be an evaluation folder made under the same conditions
+    whose checkpoint cells (if any) came from the same files (`evaluation.check_cell_owner`)."""
+    if not (source / "cells").is_dir():
+        raise ValueError(f"--reuse-cells {source} has no cells/ folder")
+    path = source / "conditions.json"
+    before = json.loads(path.read_text()) if path.exists() else {}
+    if before != conditions:
+        raise ValueError(f"--reuse-cells {source} holds cells evaluated under conditions {before or 'none'}, "
+                         f"not {conditions or 'none'}")
+    ev.check_cell_owner(source, policies)
+
+
+def reuse_cells(source: pathlib.Path, todo: list[Job], paths: dict[Job, pathlib.Path]) -> int:
+    """Copy the cells of ``todo`` that ``source`` (checked by `check_reuse`) holds; returns how many.
+
+    A cell depends only on (policy, N, seed, runs) and the conditions (episodes are history-free),
+    so such a folder holds the very episodes this evaluation would run. A checkpoint's cells are
+    taken only where ``source`` recorded which file they came from."""
+    copied = 0
+    for job in todo:
+        cell = source / "cells" / paths[job].name
+        if cell.exists() and (job[0] in ev.NAMED_POLICIES or ev.fingerprint_path(source, job[0]).exists()):
+            copy_atomically(cell, paths[job])
+            copied += 1
+    return copied
+
+
 def check_out_conditions(out: pathlib.Path, conditions: dict) -> None:
     """One output folder holds cells of one set of conditions: a folder made under other
     conditions is refused (its cells would be mixed with these)."""
@@ -205,6 +238,8 @@ def main(argv: list[str] | None = None) -> int:
              **({"physics": args.physics} if args.physics is not None else {})})
         check_out_conditions(args.out, conditions)
         ev.check_cell_owner(args.out, args.policies)
+        if args.reuse_cells is not None:
+            check_reuse(args.reuse_cells, args.policies, conditions)
     except ValueError as err:
         print(f"shelf-evaluate: error: {err}", file=sys.stderr)
         return 2
@@ -219,6 +254,10 @@ def main(argv: list[str] | None = None) -> int:
         if conditions and not (args.out / "conditions.json").exists():
             write_json_atomically(args.out / "conditions.json", conditions)
         ev.check_cell_owner(args.out, [job[0] for job in todo], record=True)
+        if args.reuse_cells is not None:
+            copied = reuse_cells(args.reuse_cells, todo, paths)
+            todo = [job for job in todo if not paths[job].exists()]
+            print(f"{copied} cells copied from {args.reuse_cells}, {len(todo)} to run", flush=True)
         start = time.perf_counter()
         if args.backend == "ray":
             try:
