@@ -39,6 +39,10 @@ observation, the masks and the env's own planning see the noisy map, rewards the
 sensor and puts the carried object down when it drags a neighbour (`shelf_env.robot.DragWatch`);
 ``info["interventions"]`` lists what it did.
 
+``safe_picks=True`` (off by default): `action_masks` leaves out the picks whose object would be
+carried out of the opening through a taller visible neighbour (`shelf_env.clearance`), the motion
+that drags most fallen objects out; the heuristics restrict their picks the same way.
+
 ``sleeping=True`` (default) lets objects at rest sleep in Bullet between contacts, which makes
 actions cheaper with many objects (`benchmarks/sleeping.py`); ``sleeping=False`` simulates every object at every physics
 step (see `shelf_env.world`).
@@ -61,6 +65,7 @@ import pybullet as pb
 from shelf_env import params, task
 from shelf_env.actions import PRIMITIVES, ActionCodec, clip_target, map_names
 from shelf_env.camera import CLASS_RGB, CameraConfig, HeightmapCamera, recolour, region_masks
+from shelf_env.clearance import carry_clear
 from shelf_env.objects import OBJECT_SETS, ObjectSpec, sample_specs
 from shelf_env.perception import PerceptionNoise
 from shelf_env.placement import place_position
@@ -103,6 +108,7 @@ class ShelfSortEnv(gym.Env):
     _regions_mask: np.ndarray
     _semantic: tuple[np.ndarray, np.ndarray] | None
     _obs: np.ndarray | None
+    safe_picks: bool
 
     def __init__(
         self,
@@ -118,6 +124,7 @@ class ShelfSortEnv(gym.Env):
         perception_noise: PerceptionNoise | dict | None = None,
         closed_loop: bool = False,
         physics: str | Physics = "fast",
+        safe_picks: bool = False,
     ) -> None:
         if object_set not in OBJECT_SETS:
             raise ValueError(f"unknown object_set {object_set!r}; expected one of {OBJECT_SETS}")
@@ -137,6 +144,10 @@ class ShelfSortEnv(gym.Env):
         self.perception_noise = PerceptionNoise.from_any(perception_noise)
         #: `shelf_env.robot.DragWatch` of the carried object (None: open loop, as in the paper).
         self.drag_watch = DragWatch() if closed_loop else None
+        if not isinstance(safe_picks, bool):
+            raise ValueError(f"safe_picks must be True or False, got {safe_picks!r}")
+        #: Whether `action_masks` (and the heuristics) leave out picks whose carry is blocked.
+        self.safe_picks = safe_picks
         self._noise_rng = None
         self.max_objects = int(max_objects)
         self.num_objects = self._check_num_objects(num_objects)
@@ -362,6 +373,10 @@ class ShelfSortEnv(gym.Env):
         what the observation shows: the visible object cells. It is mirror-symmetric across the
         cabinet's width (push-left at col c <-> push-right at col W-1-c) and blind to classes.
         When no object is visible at all, every action is allowed (the mask has nothing to say).
+
+        With ``safe_picks=True`` a pick is allowed only where its object can be carried out of the
+        opening clear of every other visible object (`shelf_env.clearance.carry_clear`), unless no
+        pick is: then every pick on an object stays allowed (a pick-only policy must act).
         """
         if self._semantic is None:
             raise RuntimeError("call reset() before action_masks()")
@@ -372,8 +387,12 @@ class ShelfSortEnv(gym.Env):
         reach = int(round(params.PUSH_LENGTH / self.camera.pixel_size))
         counts = np.concatenate([np.zeros((self.rows, 1), dtype=np.int64), np.cumsum(band, axis=1)], axis=1)
         cols = np.arange(self.cols)
+        pick = occupied
+        if self.safe_picks:
+            clear = carry_clear(*self._semantic, self.camera.pixel_size)
+            pick = clear if clear.any() else occupied
         masks = {
-            "pick": occupied,
+            "pick": pick,
             # push-left moves towards col 0: objects in cols [c - reach, c]
             "push_left": (counts[:, cols + 1] - counts[:, np.maximum(cols - reach, 0)]) > 0,
             "push_right": (counts[:, np.minimum(cols + reach, self.cols - 1) + 1] - counts[:, cols]) > 0,

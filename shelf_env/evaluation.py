@@ -205,7 +205,7 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
 
 
 #: Env options an evaluation may set (the rest of the env is fixed by the protocol and the policy).
-CONDITION_KEYS = ("perception_noise", "closed_loop", "physics")
+CONDITION_KEYS = ("perception_noise", "closed_loop", "physics", "safe_picks")
 
 
 def check_conditions(conditions: dict[str, Any] | None) -> dict[str, Any]:
@@ -219,6 +219,8 @@ def check_conditions(conditions: dict[str, Any] | None) -> dict[str, Any]:
     PerceptionNoise.from_any(conditions.get("perception_noise"))
     if not isinstance(conditions.get("closed_loop", False), bool):
         raise ValueError(f"closed_loop must be true or false, got {conditions['closed_loop']!r}")
+    if not isinstance(conditions.get("safe_picks", False), bool):
+        raise ValueError(f"safe_picks must be true or false, got {conditions['safe_picks']!r}")
     if "physics" in conditions:
         from shelf_env.world import PHYSICS, Physics
 
@@ -226,6 +228,13 @@ def check_conditions(conditions: dict[str, Any] | None) -> dict[str, Any]:
             raise ValueError(f"physics must be one of {sorted(PHYSICS)}, got {conditions['physics']!r}")
         Physics.named(conditions["physics"])
     return conditions
+
+
+def folder_conditions(out: pathlib.Path) -> dict[str, Any]:
+    """The conditions an evaluation folder's cells were made under (its ``conditions.json``; none
+    when it has no such file)."""
+    path = pathlib.Path(out) / "conditions.json"
+    return check_conditions(json.loads(path.read_text())) if path.exists() else {}
 
 
 def make_env(policy: str, num_objects: int, object_set: str = "ycb", primitives: tuple[str, ...] | None = None,

@@ -22,6 +22,10 @@ whose edge pokes out of their region.
   distance-from-region plus distance-from-the-back: objects in front are more accessible and
   hide others.
 
+With the env's ``safe_picks=True`` both choose only among picks whose carry out of the opening
+clears the other visible objects (`ObservationView.restrict_to_clear_carries`), as the env's mask
+does for the learned policies.
+
 When every visible object is sorted but the episode goes on, something is hidden: both pick the
 front-most object, to reveal what it hides.
 """
@@ -33,7 +37,9 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
+from shelf_env import params
 from shelf_env.camera import CLASS_RGB, REGION_RGB
+from shelf_env.clearance import carry_clear
 from shelf_env.env import ShelfSortEnv
 from shelf_env.placement import _window_sum
 
@@ -74,6 +80,16 @@ class ObservationView:
             if rect is not None and rect[0] <= r <= rect[1] and rect[2] <= c <= rect[3]:
                 sorted_cells |= cells
         return cls(object_class, blob, regions, graspable, sorted_cells)
+
+    def restrict_to_clear_carries(self, obs: np.ndarray, pixel_size: float) -> None:
+        """Keep only the graspable cells whose carry out of the opening clears the other visible
+        objects (`shelf_env.clearance.carry_clear` on the blobs and the height channel), unless no
+        unsorted object has one. Blobs are objects as the colours show them: touching objects of
+        one class are one blob, so one of them is not an obstacle to the other."""
+        height = obs[3].astype(float) / 255.0 * params.CABINET_HEIGHT
+        clear = self.graspable & carry_clear(self.blob, height, pixel_size)
+        if (clear & ~self.sorted_cells).any():
+            self.graspable = clear
 
     def distance_to_region(self) -> np.ndarray:
         """(H, W) distance in cells from each object cell to its class's region rectangle (0 inside).
@@ -169,12 +185,16 @@ class PickHeuristic(ObservationPolicy):
         self.rows, self.cols = base.rows, base.cols
         self.pixel_size = base.camera.pixel_size
         self.margin_cells = int(round(CUP_MARGIN_M / self.pixel_size))
+        #: The env's ``safe_picks``: choose only among picks whose carry clears the neighbours.
+        self.safe_picks = bool(getattr(base, "safe_picks", False))
 
     def _pick(self, row: int, col: int) -> int:
         return self.codec.encode("pick", int(row), int(col))
 
     def _act(self, obs: np.ndarray) -> int:
         view = ObservationView.from_observation(obs, self.margin_cells)
+        if self.safe_picks:
+            view.restrict_to_clear_carries(obs, self.pixel_size)
         if not view.graspable.any():  # nothing visible: pick the middle of the floor (a no-op probe)
             return self._pick(self.rows // 2, self.cols // 2)
         row, col = self.choose(view)

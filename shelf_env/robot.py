@@ -346,8 +346,8 @@ class Robot:
             self.held = None
 
 
-def _z_max(motion: MotionConfig) -> float:
-    """Highest TCP height that keeps the tool under the cabinet ceiling."""
+def carry_height(motion: MotionConfig) -> float:
+    """Highest TCP height that keeps the tool under the cabinet ceiling: where the pick carries."""
     return params.CABINET_HEIGHT - TOOL_TOP_ABOVE_TCP - motion.ceiling_clearance
 
 
@@ -426,7 +426,7 @@ class Primitives:
         one of ``objects``, grip it, lift it as high as the ceiling allows and carry it out of the
         opening. Returns the `Grasp`, or None (arm back home) if the cup found nothing to grip."""
         r, m = self.robot, self.robot.motion
-        z_max = _z_max(m)
+        z_max = carry_height(m)
         z_app = min(surface_z + m.pick_clearance, z_max)
         z_low = max(surface_z - 0.01, 0.0)
         outside = np.array([m.outside_x, y, z_app])
@@ -531,7 +531,7 @@ class Primitives:
         r.release()
         r.hold_still(12)
         here = self._commanded_tcp()
-        r.move_linear(here, np.array([x, y, min(here[2] + m.lift, _z_max(m))]), m.vertical_speed)
+        r.move_linear(here, np.array([x, y, min(here[2] + m.lift, carry_height(m))]), m.vertical_speed)
         here = self._commanded_tcp()
         r.move_linear(here, np.array([min(m.outside_x, x), y, here[2]]), m.approach_speed)
         r.go_home()

@@ -118,11 +118,13 @@ class FallTrace(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-def replay(policy: str, num_objects: int, seed: int, run: int, object_set: str = "ycb") -> dict[str, Any]:
+def replay(policy: str, num_objects: int, seed: int, run: int, object_set: str = "ycb",
+           conditions: dict[str, Any] | None = None) -> dict[str, Any]:
     """Replay one evaluation episode (the env, scene, greedy policy and rollout of
-    `evaluation.evaluate_cell`) and return its record's outcome with its trace: per action the
-    primitive, and the objects that left the cabinet with the phase and whether it was held."""
-    env = FallTrace(ev.make_env(policy, num_objects, object_set))
+    `evaluation.evaluate_cell`, under the evaluation's ``conditions``) and return its record's
+    outcome with its trace: per action the primitive, and the objects that left the cabinet with
+    the phase and whether it was held."""
+    env = FallTrace(ev.make_env(policy, num_objects, object_set, conditions=conditions))
     try:
         agent = ev.make_policy(policy, env, seed=ev.scene_seed(seed, num_objects, 10**6))
         outcome = ev.run_episode(env, agent, ev.scene_seed(seed, num_objects, run))
@@ -170,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
             ev.check_policy(policy)
         ev.check_ns(args.ns)
         ev.check_cell_owner(args.folder, args.policies)
+        conditions = ev.folder_conditions(args.folder)  # replayed under the conditions they ran in
         cells = sorted((args.folder / "cells").glob("*.json"))
         if not cells:
             raise ValueError(f"{args.folder}/cells has no evaluation cells")
@@ -185,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     traces, mismatches = [], 0
     for (label, n), records in sorted(chosen.items()):
         for r in records[: args.limit or None]:
-            trace = replay(by_label[label], n, r.seed, r.run, r.object_set)
+            trace = replay(by_label[label], n, r.seed, r.run, r.object_set, conditions)
             if (trace["fell"], trace["actions"], trace["success"]) != (r.fell, r.actions, r.success):
                 mismatches += 1
                 trace["mismatch"] = {"recorded": {"fell": r.fell, "actions": r.actions, "success": r.success}}

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import gymnasium as gym
+import pytest
 
 from shelf_env import evaluation as ev
 from shelf_env import traces
@@ -62,3 +63,20 @@ def test_bad_input_is_one_line(tmp_path, capsys):
     assert "has no evaluation cells" in capsys.readouterr().err
     assert traces.main([str(tmp_path), "--policies", "nope.zip", "--ns", "3"]) == 2
     assert "nope.zip" in capsys.readouterr().err
+
+
+def test_episodes_are_replayed_under_the_folders_conditions(tmp_path, monkeypatch):
+    ev.save_cell(ev.cell_path(tmp_path, "h-d", "ycb", 3, 2, 1), [FELL])
+    (tmp_path / "conditions.json").write_text(json.dumps({"safe_picks": True}))
+    seen = []
+
+    def make_env(policy, num_objects, object_set="ycb", primitives=None, conditions=None):
+        seen.append(conditions)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(ev, "make_env", make_env)
+    with pytest.raises(RuntimeError, match="stop here"):
+        traces.main([str(tmp_path), "--policies", "h-d", "--ns", "3"])
+    assert seen == [{"safe_picks": True}]
+    (tmp_path / "conditions.json").write_text(json.dumps({"closed_loop": "yes"}))
+    assert traces.main([str(tmp_path), "--policies", "h-d", "--ns", "3"]) == 2  # bad conditions: one line

@@ -85,6 +85,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--perception-noise", type=json_object, default=None, metavar="JSON",
                    help='evaluate under perception noise, e.g. \'{"dropout": 0.1, "class_flip": 0.05}\'')
     p.add_argument("--closed-loop", action="store_true", help="evaluate with closed-loop primitives")
+    p.add_argument("--safe-picks", action="store_true",
+                   help="evaluate with the env's safe_picks: every policy picks only objects whose carry out "
+                        "of the opening clears the other visible objects (shelf_env.clearance)")
     p.add_argument("--physics", default=None, metavar="NAME",
                    help='"reference" to evaluate on the physics of results before 2026-11-23 '
                         '(default: the env\'s, "fast"; shelf_env.world.PHYSICS)')
@@ -180,8 +183,7 @@ def check_reuse(source: pathlib.Path, policies: list[str], conditions: dict) -> 
     whose checkpoint cells (if any) came from the same files (`evaluation.check_cell_owner`)."""
     if not (source / "cells").is_dir():
         raise ValueError(f"--reuse-cells {source} has no cells/ folder")
-    path = source / "conditions.json"
-    before = json.loads(path.read_text()) if path.exists() else {}
+    before = ev.folder_conditions(source)
     if before != conditions:
         raise ValueError(f"--reuse-cells {source} holds cells evaluated under conditions {before or 'none'}, "
                          f"not {conditions or 'none'}")
@@ -206,9 +208,8 @@ def reuse_cells(source: pathlib.Path, todo: list[Job], paths: dict[Job, pathlib.
 def check_out_conditions(out: pathlib.Path, conditions: dict) -> None:
     """One output folder holds cells of one set of conditions: a folder made under other
     conditions is refused (its cells would be mixed with these)."""
-    path = out / "conditions.json"
-    if path.exists():
-        before = json.loads(path.read_text())
+    if (out / "conditions.json").exists():
+        before = ev.folder_conditions(out)
         if before != conditions:
             raise ValueError(f"{out} holds cells evaluated under conditions {before}, not {conditions}: "
                              "use another --out")
@@ -235,6 +236,7 @@ def main(argv: list[str] | None = None) -> int:
         conditions = ev.check_conditions(
             {**({"perception_noise": args.perception_noise} if args.perception_noise is not None else {}),
              **({"closed_loop": True} if args.closed_loop else {}),
+             **({"safe_picks": True} if args.safe_picks else {}),
              **({"physics": args.physics} if args.physics is not None else {})})
         check_out_conditions(args.out, conditions)
         ev.check_cell_owner(args.out, args.policies)

@@ -1,0 +1,55 @@
+"""Which picks can be carried out of the cabinet without sweeping a neighbour out with them.
+
+The pick primitive (`shelf_env.robot.Primitives.pick`) lifts the gripped object as high as the
+ceiling allows and carries it straight out of the opening. The object hangs under the cup: gripped
+on its top at height ``h`` (the observed surface height of the pick cell) it spans
+``[z_carry - h, z_carry]`` during the carry, where ``z_carry`` is the highest TCP height under the
+ceiling (18.5 cm in the 27 cm cabinet). Any object between it and the opening whose top is higher
+than ``z_carry - h`` is in its way and is shoved, or dragged, out of the cabinet: the paper's main
+failure (§V-d), and in our evaluations the cause of most falls of every policy (results/models).
+
+`carry_clear` reads that from a heightmap: a pick cell is *clear* when every other visible object
+in the corridor swept by its object — the object's columns widened by ``side_cells``, from its
+back-most visible row to the front of the cabinet — is lower than ``z_carry - h - tolerance``. It
+uses only what the camera sees (object cells and their heights), so a policy can compute it too;
+what it cannot know is what is hidden (an object occluded behind another is not in the corridor of
+anything in front of it, so this rarely matters) and how objects swing in the cup.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shelf_env import params
+from shelf_env.robot import MotionConfig, carry_height
+
+#: TCP height of the carry with the default motion: the tool's top 5 mm under the ceiling.
+Z_CARRY = carry_height(MotionConfig())
+#: Lateral margin of the swept corridor, and vertical margin over a neighbour's top.
+SIDE_M = 0.005
+TOLERANCE_M = 0.005
+
+
+def carry_clear(labels: np.ndarray, height: np.ndarray, pixel_size: float = params.PIXEL_SIZE,
+                z_carry: float = Z_CARRY, side: float = SIDE_M, tolerance: float = TOLERANCE_M) -> np.ndarray:
+    """(H, W) bool: the object cells whose pick can be carried out of the opening clear of the others.
+
+    ``labels`` (H, W) int: one id per visible object (an object uid, or a blob index), < 0 where no
+    object is seen; ``height`` (H, W): the observed surface height in metres. Rows run from the
+    back (row 0) to the front, as in the env's observation.
+    """
+    labels, height = np.asarray(labels), np.asarray(height, dtype=float)
+    if labels.shape != height.shape or labels.ndim != 2:
+        raise ValueError(f"labels and height must be (H, W) maps of one shape, got {labels.shape} and {height.shape}")
+    rows, cols = labels.shape
+    side_cells = int(round(side / pixel_size))
+    clear = np.zeros((rows, cols), dtype=bool)
+    for uid in np.unique(labels[labels >= 0]):
+        own = labels == uid
+        rr, cc = np.nonzero(own)
+        band = (slice(int(rr.min()), rows), slice(max(int(cc.min()) - side_cells, 0), int(cc.max()) + side_cells + 1))
+        others = (labels[band] >= 0) & (labels[band] != uid)
+        tallest = float(height[band][others].max(initial=0.0))
+        # gripped at a cell of height h, the object's bottom is z_carry - h during the carry
+        clear |= own & (height + tallest < z_carry - tolerance)
+    return clear

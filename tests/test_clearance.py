@@ -1,0 +1,138 @@
+"""Safe picks (`shelf_env.clearance`, ``ShelfSortEnv(safe_picks=True)``): a pick whose object would be
+carried out of the opening through a taller neighbour is left out of the mask and of the
+heuristics' choices, and the carry that the mask allows leaves the neighbour in the cabinet."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from shelf_env.clearance import Z_CARRY, carry_clear
+from shelf_env.evaluation import check_conditions
+from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
+from shelf_env.world import Region
+from tests.conftest import REGIONS
+from tests.test_closed_loop import CLEAN_SCENE, DRAG_SCENE
+
+
+def heightmap(*objects: tuple[int, int, int, int, float]) -> tuple[np.ndarray, np.ndarray]:
+    """(labels, height) of 80 x 120 cells with objects (row0, row1, col0, col1, height), label = index."""
+    labels, height = np.full((80, 120), -1), np.zeros((80, 120))
+    for k, (r0, r1, c0, c1, h) in enumerate(objects):
+        labels[r0:r1, c0:c1], height[r0:r1, c0:c1] = k, h
+    return labels, height
+
+
+def test_z_carry_is_the_picks_carry_height():
+    assert Z_CARRY == pytest.approx(0.27 - 0.08 - 0.005)
+
+
+def test_a_tall_object_behind_a_tall_one_is_not_clear_and_the_front_one_is():
+    labels, height = heightmap((10, 20, 50, 60, 0.12), (60, 70, 52, 62, 0.08))  # back 12 cm, front 8 cm
+    clear = carry_clear(labels, height)
+    assert not clear[labels == 0].any()  # 0.12 + 0.08 > 0.185: it would sweep the front one
+    assert clear[labels == 1].all()  # nothing in front of the front one
+    assert not clear[labels < 0].any()  # only object cells are ever clear
+
+
+def test_the_corridor_is_the_objects_columns_from_its_back_to_the_front():
+    # the front object beside the corridor (one 5 mm cell of margin left between them): clear
+    labels, height = heightmap((10, 20, 50, 60, 0.12), (60, 70, 61, 71, 0.08))
+    assert carry_clear(labels, height)[labels == 0].all()
+    # touching the corridor's margin: not clear
+    labels, height = heightmap((10, 20, 50, 60, 0.12), (60, 70, 60, 70, 0.08))
+    assert not carry_clear(labels, height)[labels == 0].any()
+    # behind it does not matter: only what lies between the object and the opening
+    labels, height = heightmap((40, 50, 50, 60, 0.12), (10, 20, 50, 60, 0.15))
+    assert carry_clear(labels, height)[labels == 0].all()
+
+
+def test_the_held_objects_hang_is_its_pick_cells_height():
+    # a short neighbour in front: a 10 cm object clears it (0.10 + 0.06 < 0.18), a 13 cm one does not
+    for h, ok in ((0.10, True), (0.13, False)):
+        labels, height = heightmap((10, 20, 50, 60, h), (60, 70, 50, 60, 0.06))
+        assert carry_clear(labels, height)[labels == 0].all() == ok
+
+
+def test_carry_clear_rejects_maps_of_different_shapes():
+    with pytest.raises(ValueError, match="one shape"):
+        carry_clear(np.zeros((80, 120), int), np.zeros((80, 119)))
+
+
+def scene_env(scene, regions=REGIONS, **kwargs):
+    env = gym.make("ShelfSort-v0", num_objects=2, **kwargs).unwrapped
+    env.reset(seed=0)
+    env.set_scene(scene, regions)
+    return env
+
+
+def test_safe_picks_mask_leaves_out_the_pick_that_drags_the_neighbour_out():
+    env = scene_env(DRAG_SCENE, safe_picks=True)
+    try:
+        mask = env.action_masks()
+        back, front = env.codec.action_at("pick", 0.30, 0.0), env.codec.action_at("pick", 0.06, 0.0)
+        assert not mask[back] and mask[front]
+        # the pushes are untouched by safe_picks
+        plain = scene_env(DRAG_SCENE)
+        try:
+            n = env.rows * env.cols
+            assert np.array_equal(mask[n:], plain.action_masks()[n:])
+            assert plain.action_masks()[back]
+        finally:
+            plain.close()
+        # what the mask allows is the carry that leaves both objects in the cabinet (and here sorts them)
+        _, reward, _, _, info = env.step(front)
+        assert not info["fell"] and reward != -10 and len(env.world.objects) == 2
+    finally:
+        env.close()
+
+
+def test_safe_picks_changes_nothing_where_every_carry_is_clear():
+    env, plain = scene_env(CLEAN_SCENE, safe_picks=True), scene_env(CLEAN_SCENE)
+    try:
+        assert np.array_equal(env.action_masks(), plain.action_masks())
+    finally:
+        env.close()
+        plain.close()
+
+
+def test_h_d_with_safe_picks_picks_the_front_object_first():
+    # the drag scene's boxes, both misplaced: the back one (class 0, region on the right) is farther
+    # from its region than the front one (class 1, region on the left), so H-d goes for it first,
+    # and would drag the front one out, unless safe_picks rules its carry out
+    regions = [Region(0.0, 0.40, -0.30, -0.12), Region(0.0, 0.40, 0.12, 0.30), Region(0.0, 0.40, -0.09, 0.09)]
+    scene = [(DRAG_SCENE[0][0], 0, 0.30, 0.05, 0.0), (DRAG_SCENE[1][0], 1, 0.06, 0.05, 0.0)]
+    for safe, expected_x in ((False, 0.30), (True, 0.06)):
+        env = scene_env(scene, regions, safe_picks=safe)
+        try:
+            _, row, col = env.decode_action(int(DistanceHeuristic(env).predict(env._observe())[0]))
+            x, _ = env.codec.cell_centre(row, col)
+            assert abs(x - expected_x) < 0.04, (safe, x)
+        finally:
+            env.close()
+
+
+def test_heuristics_keep_their_choice_when_no_misplaced_object_has_a_clear_carry():
+    # only the back box is misplaced (class 0, region on the left; the front one, class 1, stands in
+    # its region in the middle): there is no clear alternative, so the choice is the plain one
+    scene = [(DRAG_SCENE[0][0], 0, 0.30, 0.0, 0.0), (DRAG_SCENE[1][0], 1, 0.06, 0.0, 0.0)]
+    for heuristic in (DistanceHeuristic, AccessibilityHeuristic):
+        choices = []
+        for safe in (False, True):
+            env = scene_env(scene, safe_picks=safe)
+            try:
+                choices.append(int(heuristic(env).predict(env._observe())[0]))
+            finally:
+                env.close()
+        assert choices[0] == choices[1]
+        _, row, _ = env.decode_action(choices[1])
+        assert abs(env.codec.cell_centre(row, 0)[0] - 0.30) < 0.04  # the back box
+
+
+def test_safe_picks_must_be_a_bool():
+    with pytest.raises(ValueError, match="safe_picks"):
+        gym.make("ShelfSort-v0", safe_picks="yes")
+    with pytest.raises(ValueError, match="safe_picks"):
+        check_conditions({"safe_picks": 1})
+    assert check_conditions({"safe_picks": True}) == {"safe_picks": True}
