@@ -49,6 +49,8 @@ class TrainConfig:
     primitives: tuple[str, ...] = ("pick", "push")
     pixel_size: float = 0.01
     object_set: str = "train"
+    # the env's safe_picks (shelf_env.clearance): the mask leaves out picks whose carry is blocked
+    safe_picks: bool = False
     # lever 1: one action mask everywhere (False: the paper's all-pixel argmax)
     masked: bool = True
     masked_exploration: bool = True
@@ -110,6 +112,8 @@ class TrainConfig:
         for key, allowed in choices.items():
             if getattr(self, key) not in allowed:
                 raise ValueError(f"TrainConfig.{key} must be one of {list(allowed)}, got {getattr(self, key)!r}")
+        if not isinstance(self.safe_picks, bool):
+            raise ValueError(f"TrainConfig.safe_picks must be true or false, got {self.safe_picks!r}")
         names = self.primitives
         if not names or len(set(names)) != len(names) or not set(names) <= set(PRIMITIVES):
             raise ValueError(f"TrainConfig.primitives must be distinct names from {PRIMITIVES}, got {names}")
@@ -181,7 +185,8 @@ PRESETS: dict[str, TrainConfig] = {
 def make_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any) -> gym.Env:
     """A ShelfSort-v0 env with the config's layout, cell size and object set."""
     return gym.make("ShelfSort-v0", num_objects=num_objects or config.start_objects, object_set=config.object_set,
-                    primitives=config.primitives, pixel_size=config.pixel_size, **kwargs)
+                    primitives=config.primitives, pixel_size=config.pixel_size, safe_picks=config.safe_picks,
+                    **kwargs)
 
 
 def env_codec(env: gym.Env | VecEnv) -> ActionCodec:

@@ -124,3 +124,17 @@ def test_callbacks_include_q_map_images_only_when_asked():
     assert [type(c) for c in with_images] == [CurriculumCallback, QMapImageCallback] and with_images[1].every == 500
     with pytest.raises(ValueError, match="tb_images_every"):
         PRESETS["recipe"].replace(tb_images_every=-1)
+
+
+def test_safe_picks_reaches_the_training_and_check_envs_and_the_zoo_file():
+    from shelf_env.zoo import ENV_ID, zoo_hyperparams
+
+    config = PRESETS["p_s"].replace(safe_picks=True)
+    env = make_env(config)
+    assert env.unwrapped.safe_picks and not make_env(PRESETS["p_s"]).unwrapped.safe_picks
+    assert DistanceHeuristic(env).safe_picks  # demonstrations on it restrict their picks too
+    assert zoo_hyperparams(config)[ENV_ID]["env_kwargs"]["safe_picks"] is True
+    assert TrainConfig.from_dict(config.to_dict()).safe_picks
+    with pytest.raises(ValueError, match="safe_picks"):
+        config.replace(safe_picks="yes")
+    env.close()
