@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -274,6 +275,24 @@ def make_callbacks(config: TrainConfig, seed: int = 0, verbose: int = 1) -> list
     if config.tb_images_every:
         callbacks.append(QMapImageCallback(every=config.tb_images_every))
     return callbacks
+
+
+def init_from_checkpoint(model: Any, path: str | os.PathLike) -> None:
+    """Start ``model`` (a fresh `PixelDoubleDQN`) from the weights of the checkpoint at ``path``, online
+    and target networks both: fine-tuning a trained model under another configuration (e.g.
+    ``safe_picks``) without its replay buffer, as rl-zoo3's ``--trained-agent`` does. The checkpoint
+    must have the model's observation and action spaces and network; a clear `ValueError` otherwise."""
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    trained = PixelDoubleDQN.load(path, device=model.device)
+    for name in ("observation_space", "action_space"):
+        if getattr(trained, name) != getattr(model, name):
+            raise ValueError(f"{path} was trained on {name} {getattr(trained, name)}, this run has "
+                             f"{getattr(model, name)}: same primitives and cell size needed")
+    try:
+        model.policy.load_state_dict(trained.policy.state_dict())
+    except RuntimeError as err:
+        raise ValueError(f"{path} has another network than this run (widths?): {str(err).splitlines()[0]}") from err
 
 
 def make_curriculum(config: TrainConfig, seed: int = 0, verbose: int = 1) -> Any:

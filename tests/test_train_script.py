@@ -111,3 +111,36 @@ def test_a_capped_curriculum_ends_the_run_after_its_last_stage(tmp_path, capsys)
     assert train.main([*common, "--amend", "max_stage_timesteps=5"]) == 0
     progress = json.loads((tmp_path / "progress.json").read_text())
     assert progress["timesteps"] == 7 and progress["curriculum"]["finished"] == 7
+
+
+def test_init_from_starts_a_new_run_from_trained_weights(tmp_path, capsys):
+    import torch as th
+
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    common = ["--learning-starts", "50", "--buffer-size", "200", "--widths", "4", "8", "8",
+              "--checkpoint-minutes", "0", "--threads", "1", "--set", "demo_steps=2"]
+    trained = tmp_path / "a"
+    train.main([*common, "--out", str(trained), "--max-steps", "2", "--learning-starts", "1"])
+    zip_path = trained / "model.zip"
+    # a new run under another configuration (safe picks), from those weights; no learning before step 50
+    assert train.main([*common, "--out", str(tmp_path / "b"), "--max-steps", "2", "--init-from", str(zip_path),
+                       "--set", "safe_picks=true"]) == 0
+    a, b = PixelDoubleDQN.load(zip_path), PixelDoubleDQN.load(tmp_path / "b" / "model.zip")
+    for (name, wa), (_, wb) in zip(a.policy.state_dict().items(), b.policy.state_dict().items()):
+        assert th.equal(wa, wb), name
+    progress = json.loads((tmp_path / "b" / "progress.json").read_text())
+    assert progress["init_from"]["path"] == str(zip_path) and len(progress["init_from"]["sha256"]) == 64
+    assert progress["config"]["safe_picks"] is True and b.num_timesteps == 2
+    # a fresh run from scratch does not start from them
+    train.main([*common, "--out", str(tmp_path / "c"), "--max-steps", "1", "--seed", "1"])
+    c = PixelDoubleDQN.load(tmp_path / "c" / "model.zip")
+    assert not all(th.equal(x, y) for x, y in zip(a.policy.state_dict().values(), c.policy.state_dict().values()))
+    capsys.readouterr()
+    # bad input: one line, nothing written
+    assert train.main([*common, "--out", str(tmp_path / "d"), "--init-from", str(tmp_path / "none.zip")]) == 2
+    assert "none.zip" in capsys.readouterr().err
+    pick_only = ["--init-from", str(zip_path), "--primitives", "pick"]
+    assert train.main([*common, "--out", str(tmp_path / "d"), *pick_only]) == 2
+    assert "trained with primitives ('pick', 'push')" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()

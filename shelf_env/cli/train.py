@@ -19,6 +19,11 @@ running curriculum can take up (``AMENDABLE``: stage bounds and greedy checks, n
 the env or the optimiser) and records the change and the env step it took effect at in
 ``progress.json`` (``amendments``), so that the run's history says what it ran under and when.
 
+``--init-from ZIP`` starts a new run from a trained checkpoint's weights (same primitives, cell
+size and network; online and target networks; not its buffer), e.g. to fine-tune a shipped model
+under another configuration (``--set safe_picks=true``); ``progress.json`` records the file's
+sha256. A resumed run continues from its own checkpoint.
+
 ``--mirror DIR`` keeps a copy of everything but the replay buffer (``model.zip``,
 ``progress.json``, ``episodes.csv``, ``tb/``) in ``DIR`` after every checkpoint, for committing.
 A run whose ``--out`` has no checkpoint (a fresh machine) starts from that copy: it resumes from
@@ -30,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
 import json
 import pathlib
 import sys
@@ -48,6 +54,7 @@ from shelf_env.training import (
     TrainConfig,
     collect_demonstrations,
     demo_policy,
+    init_from_checkpoint,
     make_callbacks,
     make_env,
     make_model,
@@ -99,6 +106,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--amend", dest="amendments", type=parse_set, action="append", default=[], metavar="KEY=VALUE",
                    help=f"change a resumed run's configuration from now on; one of {', '.join(AMENDABLE)}")
     p.add_argument("--uniform-exploration", action="store_true", help="draw exploratory actions uniformly")
+    p.add_argument("--init-from", type=pathlib.Path, default=None, metavar="ZIP",
+                   help="a new run starts from this checkpoint's weights (same layout and network; its buffer "
+                        "is not used); a resumed run continues from its own checkpoint")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     return p.parse_args(argv)
@@ -234,6 +244,18 @@ def truncate_csv(path: pathlib.Path, rows: int) -> None:
     write_text_atomically(path, "".join(lines[: rows + 1]))
 
 
+def check_init_from(path: pathlib.Path, config: TrainConfig) -> None:
+    """``--init-from``: a readable checkpoint with the run's primitives and cell size (its network
+    is checked when its weights are loaded, `shelf_env.training.init_from_checkpoint`)."""
+    from shelf_env import evaluation as ev
+
+    primitives = ev.checkpoint_primitives(path)  # a clear error for a missing or unreadable file
+    pixel_size = ev.checkpoint_pixel_size(path)
+    if set(primitives) != set(config.primitives) or abs(pixel_size - config.pixel_size) > 1e-9:
+        raise ValueError(f"--init-from {path} was trained with primitives {primitives} at {pixel_size * 1000:g} mm "
+                         f"cells; this run has {config.primitives} at {config.pixel_size * 1000:g} mm")
+
+
 def amend(config: TrainConfig, progress: dict, changes: dict[str, Any]) -> TrainConfig:
     """``config`` with ``changes`` applied (checked by TrainConfig), recorded in ``progress``'s
     ``amendments`` with the env step they take effect at; fields already at their value are no change."""
@@ -259,6 +281,8 @@ def main(argv: list[str] | None = None) -> int:
             config_from_args(args)  # TrainConfig checks its fields and values
             if args.amendments:
                 raise ValueError(f"--amend changes a resumed run, and {args.out} holds none; use --set for a new run")
+            if args.init_from is not None:
+                check_init_from(args.init_from, config_from_args(args))
         bad = sorted({key for key, _ in args.amendments} - set(AMENDABLE))
         if bad:
             raise ValueError(f"--amend cannot change {bad}; amendable fields: {list(AMENDABLE)}")
@@ -311,6 +335,11 @@ def train(args: argparse.Namespace) -> None:
                   flush=True)
     else:
         model = make_model(config, env, seed=args.seed, tensorboard_log=str(args.out / "tb"))
+        if args.init_from is not None:
+            init_from_checkpoint(model, args.init_from)
+            digest = hashlib.sha256(args.init_from.read_bytes()).hexdigest()
+            progress["init_from"] = {"path": str(args.init_from), "sha256": digest}
+            print(f"starting from the weights of {args.init_from}", flush=True)
     progress.setdefault("sessions", []).append(session_record(model, progress, args.threads,
                                                               buffer_kept=(args.out / "replay.pkl").exists()))
     demos = demo_policy(config, env)
