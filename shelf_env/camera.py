@@ -194,6 +194,12 @@ def region_masks(regions, rows: int, cols: int, pixel_size: float) -> np.ndarray
     return out
 
 
+def observed_height(obs: np.ndarray) -> np.ndarray:
+    """(H, W) metres from an observation's height channel: the inverse of `recolour`'s encoding
+    (to its 8-bit step, ~1 mm)."""
+    return np.asarray(obs)[3].astype(float) / 255.0 * params.CABINET_HEIGHT
+
+
 def recolour(cell_uid: np.ndarray, height: np.ndarray, class_of_uid: dict[int, int],
              regions: np.ndarray) -> np.ndarray:
     """The observation (4, H, W) uint8: class colours, white free space, region tints, grey

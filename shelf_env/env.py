@@ -69,7 +69,7 @@ from shelf_env.clearance import carry_clear
 from shelf_env.objects import OBJECT_SETS, ObjectSpec, sample_specs
 from shelf_env.perception import PerceptionNoise
 from shelf_env.placement import place_position
-from shelf_env.robot import DragWatch, Primitives, Robot
+from shelf_env.robot import DragWatch, Primitives, Robot, carry_height
 from shelf_env.world import Physics, Region, World, sample_regions
 
 SPAWN_TRIES = 100
@@ -389,7 +389,7 @@ class ShelfSortEnv(gym.Env):
         cols = np.arange(self.cols)
         pick = occupied
         if self.safe_picks:
-            clear = carry_clear(*self._semantic, self.camera.pixel_size)
+            clear = carry_clear(*self._semantic, self.camera.pixel_size, z_carry=carry_height(self.robot.motion))
             pick = clear if clear.any() else occupied
         masks = {
             "pick": pick,

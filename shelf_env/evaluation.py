@@ -217,10 +217,9 @@ def check_conditions(conditions: dict[str, Any] | None) -> dict[str, Any]:
     from shelf_env.perception import PerceptionNoise
 
     PerceptionNoise.from_any(conditions.get("perception_noise"))
-    if not isinstance(conditions.get("closed_loop", False), bool):
-        raise ValueError(f"closed_loop must be true or false, got {conditions['closed_loop']!r}")
-    if not isinstance(conditions.get("safe_picks", False), bool):
-        raise ValueError(f"safe_picks must be true or false, got {conditions['safe_picks']!r}")
+    for key in ("closed_loop", "safe_picks"):
+        if not isinstance(conditions.get(key, False), bool):
+            raise ValueError(f"{key} must be true or false, got {conditions[key]!r}")
     if "physics" in conditions:
         from shelf_env.world import PHYSICS, Physics
 

@@ -37,8 +37,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
-from shelf_env import params
-from shelf_env.camera import CLASS_RGB, REGION_RGB
+from shelf_env.camera import CLASS_RGB, REGION_RGB, observed_height
 from shelf_env.clearance import carry_clear
 from shelf_env.env import ShelfSortEnv
 from shelf_env.placement import _window_sum
@@ -86,8 +85,7 @@ class ObservationView:
         objects (`shelf_env.clearance.carry_clear` on the blobs and the height channel), unless no
         unsorted object has one. Blobs are objects as the colours show them: touching objects of
         one class are one blob, so one of them is not an obstacle to the other."""
-        height = obs[3].astype(float) / 255.0 * params.CABINET_HEIGHT
-        clear = self.graspable & carry_clear(self.blob, height, pixel_size)
+        clear = self.graspable & carry_clear(self.blob, observed_height(obs), pixel_size)
         if (clear & ~self.sorted_cells).any():
             self.graspable = clear
 

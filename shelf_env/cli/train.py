@@ -278,11 +278,11 @@ def main(argv: list[str] | None = None) -> int:
         mirrored = args.mirror is not None and (args.mirror / "model.zip").exists()
         resuming = (args.out / "model.zip").exists() or mirrored
         if not resuming:  # a fresh run: its configuration is checked before anything is written
-            config_from_args(args)  # TrainConfig checks its fields and values
+            config = config_from_args(args)  # TrainConfig checks its fields and values
             if args.amendments:
                 raise ValueError(f"--amend changes a resumed run, and {args.out} holds none; use --set for a new run")
             if args.init_from is not None:
-                check_init_from(args.init_from, config_from_args(args))
+                check_init_from(args.init_from, config)
         bad = sorted({key for key, _ in args.amendments} - set(AMENDABLE))
         if bad:
             raise ValueError(f"--amend cannot change {bad}; amendable fields: {list(AMENDABLE)}")
