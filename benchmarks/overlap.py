@@ -32,25 +32,20 @@ from typing import Any
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.logger import configure
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn.pixel_dqn import draw_masked_action
-from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_env, make_model
+from shelf_env.training import PRESETS, make_env, make_model
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
-from train_loop import timed_steps  # noqa: E402  (the sequential measurement, shared)
-
-
-def _config(n: int) -> TrainConfig:
-    return PRESETS["recipe"].replace(start_objects=n, max_objects=n)
+from train_loop import prepared_model, timed_steps  # noqa: E402  (shared with the sequential measurement)
 
 
 def actor(n: int, seed: int, transitions: Any, weights: Any, learned: Any, stop: Any, max_lag: int) -> None:
     """Play the env and send transitions until ``stop`` is set; wait while ``max_lag`` ahead of the
     learner's updates (``learned``); load new weights whenever the learner sent some."""
     th.set_num_threads(1)
-    config = _config(n)
+    config = PRESETS["recipe"].replace(start_objects=n, max_objects=n)
     env = make_env(config)
     model = make_model(config, env, seed=seed)
     n_maps, rng = model.policy.n_maps, np.random.default_rng(seed)
@@ -83,14 +78,8 @@ def actor(n: int, seed: int, transitions: Any, weights: Any, learned: Any, stop:
 def overlapped(n: int, seconds: float, seed: int, sync_every: int, max_lag: int) -> dict[str, float]:
     """Env steps and gradient steps per hour of the actor/learner pair over ``seconds`` of learning."""
     th.set_num_threads(1)
-    config = _config(n)
-    env = make_env(config)
-    model = make_model(config, env, seed=seed)
-    model.set_logger(configure(None, []))
-    model._current_progress_remaining = 1.0
-    demos = demo_policy(config, env)
-    if demos is not None:  # as train_loop.py: a small demonstration store, so batches sample it too
-        model.collect_demonstrations(demos, 40)
+    config, env, model, _ = prepared_model("recipe", n, seed)
+    model._current_progress_remaining = 1.0  # what learn() sets before train(): the full learning rate
     ctx = mp.get_context("spawn")
     transitions, weights, stop = ctx.Queue(maxsize=4 * max_lag), ctx.Queue(maxsize=1), ctx.Event()
     learned = ctx.Value("i", 0)
@@ -110,7 +99,7 @@ def overlapped(n: int, seconds: float, seed: int, sync_every: int, max_lag: int)
                        next_action_masks=next_mask[None])
             received += 1
             if received == config.learning_starts:  # the buffer is filled: learning (and timing) starts
-                t_start, received0 = time.perf_counter(), received
+                t_start = time.perf_counter()
             if received > config.learning_starts:
                 model.train(gradient_steps=config.gradient_steps, batch_size=config.batch_size)
                 updates += config.gradient_steps
@@ -122,7 +111,7 @@ def overlapped(n: int, seconds: float, seed: int, sync_every: int, max_lag: int)
                     except queue_lib.Full:
                         pass
         elapsed = time.perf_counter() - t_start
-        steps = received - received0
+        steps = received - config.learning_starts
     finally:
         stop.set()
     actor_wait = 0.0

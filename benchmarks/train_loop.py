@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import Any
 
 import torch as th
 from stable_baselines3.common.logger import configure
@@ -22,8 +23,10 @@ import shelf_env  # noqa: F401
 from shelf_env.training import PRESETS, demo_policy, make_env, make_model
 
 
-def timed_steps(preset: str, n: int, steps: int, seed: int) -> tuple[float, float]:
-    """(seconds per env step while learning, seconds of demonstration collection) for one preset."""
+def prepared_model(preset: str, n: int, seed: int) -> tuple[Any, Any, Any, float]:
+    """(config, env, model, estimated seconds of the preset's demonstrations) for ``preset`` at N = n:
+    a fresh model, logging off, with 40 demonstration steps stored when the preset has them (so that
+    batches sample demonstrations, as in training)."""
     config = PRESETS[preset].replace(start_objects=n, max_objects=n)
     env = make_env(config)
     model = make_model(config, env, seed=seed)
@@ -34,6 +37,12 @@ def timed_steps(preset: str, n: int, steps: int, seed: int) -> tuple[float, floa
         t0 = time.perf_counter()
         model.collect_demonstrations(demos, 40)
         demo_seconds = (time.perf_counter() - t0) / 40 * config.demo_steps
+    return config, env, model, demo_seconds
+
+
+def timed_steps(preset: str, n: int, steps: int, seed: int) -> tuple[float, float]:
+    """(seconds per env step while learning, seconds of demonstration collection) for one preset."""
+    config, env, model, demo_seconds = prepared_model(preset, n, seed)
     model.learn(config.learning_starts)  # fill the buffer first; only learning steps are timed
     t0 = time.perf_counter()
     model.learn(steps, reset_num_timesteps=False)
