@@ -52,6 +52,8 @@ ROWS: dict[str, tuple[dict[str, Any], str]] = {
                              "from N = 1 with the paper's rule (epsilon-greedy 50-episode window)"),
     "relabel-all": ({"relabel": "all"}, "paper's relabelling (no-op steps too)"),
     "relabel-off": ({"relabel": "off"}, "no hindsight relabelling"),
+    # lever 9 switched on: the recipe's loop with the env stepped in an actor process
+    "actor": ({"actor": True}, "acting in an actor process (1 core acts, 1 learns)"),
 }
 
 

@@ -4,7 +4,8 @@ The callback reads ``info["is_success"]`` at episode ends over the last ``window
 current stage. When the rate exceeds ``threshold`` and N < ``max_value`` it raises N by one on
 every sub-env (``env.env_method(setter, N)``), restarts the algorithm's ε schedule and empties the
 window. The env applies the new N at its next reset; episodes that were already running when N
-changed are not counted for the new stage. The stage lives in ``model.curriculum_state``, which is
+changed are not counted for the new stage (with an `ActorVecEnv`, neither are the episodes among
+its transitions not consumed yet). The stage lives in ``model.curriculum_state``, which is
 saved in the model's zip, so a loaded model resumes at the stage (and ε) where it stopped.
 
 Two promotion rules:
@@ -40,6 +41,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
+
+from sb3_pixeldqn.actor import ActorVecEnv
 
 #: Paper's curriculum (§IV-D.3): start at one object, 50-episode window, > 90 %, up to 8 objects.
 START_VALUE = 1
@@ -142,7 +145,7 @@ class CurriculumCallback(BaseCallback):
         self.capped: list[int] = []
         #: Env step at which the last stage reached ``max_stage_timesteps`` (None: not yet).
         self.finished: int | None = None
-        self._stale = np.zeros(0, dtype=bool)
+        self._stale = np.zeros(0, dtype=np.int64)
 
     def _init_callback(self) -> None:
         state = getattr(self.model, "curriculum_state", None)
@@ -163,7 +166,7 @@ class CurriculumCallback(BaseCallback):
             self.finished = None
         if self.finished is not None and not self.over():
             self.finished = None  # resumed with a longer cap: the last stage goes on
-        self._stale = np.zeros(self.training_env.num_envs, dtype=bool)
+        self._stale = np.zeros(self.training_env.num_envs, dtype=np.int64)  # episode ends to leave out
         self._last_check = int(self.greedy_history[-1][0]) if self.greedy_history else self.model.num_timesteps
         self._save_state()
 
@@ -184,7 +187,7 @@ class CurriculumCallback(BaseCallback):
             if not done:
                 continue
             if self._stale[i]:
-                self._stale[i] = False
+                self._stale[i] -= 1
             elif "is_success" in info:
                 self.outcomes.append(bool(info["is_success"]))
                 changed = True
@@ -241,8 +244,11 @@ class CurriculumCallback(BaseCallback):
         self.value += 1
         self.outcomes.clear()
         self.training_env.env_method(self.setter, self.value)
-        # Episodes in progress (and ones auto-reset this very step) were drawn with the old N.
-        self._stale[:] = True
+        # Episodes in progress (and ones auto-reset this very step) were drawn with the old N; with
+        # an actor process, so were the episodes ending among its transitions not consumed yet.
+        self._stale[:] = 1
+        if isinstance(self.training_env, ActorVecEnv):
+            self._stale += self.training_env.pending_episode_ends()
         self.model.restart_exploration()  # type: ignore[attr-defined]
         self.history.append([self.model.num_timesteps, self.value])
         self._save_state()

@@ -49,14 +49,16 @@ import torch as th
 import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.save_util import load_from_zip_file
-from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import polyak_update
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, RolloutReturn, Schedule, TrainFreq
+from stable_baselines3.common.utils import polyak_update, should_collect_more_steps
 from stable_baselines3.common.vec_env import VecEnv
 
+from sb3_pixeldqn.actor import ActingRules, ActorVecEnv
 from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer, TransitionBatch
 from sb3_pixeldqn.files import write_atomically
 from sb3_pixeldqn.policies import FCNPolicy, PixelQNetwork, check_action_masks, describe_layout, masked_argmax
@@ -404,6 +406,62 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             self.logger.record("train/margin_loss", float(np.mean(margin_losses)))
 
     # ------------------------------------------------------------- collection
+    def collect_rollouts(
+        self,
+        env: VecEnv,
+        callback: BaseCallback,
+        train_freq: TrainFreq,
+        replay_buffer: ReplayBuffer,
+        action_noise: ActionNoise | None = None,
+        learning_starts: int = 0,
+        log_interval: int | None = None,
+    ) -> RolloutReturn:
+        """SB3's collection; with an `ActorVecEnv` as the env, the transitions its actor process
+        played (`sb3_pixeldqn.actor`), consumed in order and handled exactly as SB3's loop handles
+        the steps it takes itself: the callbacks' ``on_step`` (with ``actions``, ``new_obs``,
+        ``rewards``, ``dones``, ``infos`` in their locals), the buffer, ε, the episode logs."""
+        if not isinstance(env, ActorVecEnv):
+            return super().collect_rollouts(env, callback, train_freq, replay_buffer, action_noise, learning_starts,
+                                            log_interval)
+        self.policy.set_training_mode(False)
+        assert isinstance(replay_buffer, HindsightRelabelReplayBuffer)  # _setup_model checks the class
+        num_collected_steps, num_collected_episodes = 0, 0
+        callback.on_rollout_start()
+        while should_collect_more_steps(train_freq, num_collected_steps, num_collected_episodes):
+            self.update_actor(env)
+            env.act()
+            transition = env.receive()
+            actions, new_obs, rewards, dones, infos = (transition.action, transition.new_obs, transition.reward,
+                                                       transition.done, [transition.info])
+            self._last_obs = transition.obs  # the observation the action was chosen in, as SB3 has it here
+            self.num_timesteps += env.num_envs
+            num_collected_steps += 1
+            callback.update_locals(locals())
+            if not callback.on_step():
+                return RolloutReturn(num_collected_steps, num_collected_episodes, continue_training=False)
+            self._update_info_buffer(infos, dones)
+            noops = replay_buffer.add(transition.obs, self._final_observations(new_obs, dones, infos), actions,
+                                      rewards, dones, infos,
+                                      next_action_masks=transition.next_mask if self._use_masks else None)
+            self._noop_history.extend(noops)
+            self._last_obs = self._last_original_obs = new_obs
+            self._update_current_progress_remaining(self.num_timesteps, self._total_timesteps)
+            self._on_step()
+            if dones[0]:
+                num_collected_episodes += 1
+                self._episode_num += 1
+                if log_interval is not None and self._episode_num % log_interval == 0:
+                    self.dump_logs()
+        callback.on_rollout_end()
+        return RolloutReturn(num_collected_steps, num_collected_episodes, continue_training=True)  # one env
+
+    def update_actor(self, env: ActorVecEnv) -> None:
+        """Send ``env``'s actor this model's policy and acting rules (ε, warm-up, masks) when due."""
+        rules = ActingRules(epsilon=float(self.exploration_rate), explore_all=self.num_timesteps < self.learning_starts,
+                            masked=bool(self._use_masks), masked_exploration=bool(self._explore_masked),
+                            n_maps=int(self.policy.n_maps))
+        env.update(self.policy, self._n_updates, rules, self.seed)
+
     def _sample_action(
         self, learning_starts: int, action_noise: ActionNoise | None = None, n_envs: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:

@@ -21,6 +21,7 @@ A `TrainConfig` holds every lever of the learning recipe (docs/learning.md). Pre
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 import time
@@ -98,6 +99,12 @@ class TrainConfig:
     relabel: str = "changed"
     # TensorBoard images of the observation and the Q-maps every this many env steps (0: none)
     tb_images_every: int = 0
+    # lever 9: act in a separate process (sb3_pixeldqn.actor.ActorVecEnv) while the learner trains;
+    # the actor may run actor_max_lag transitions ahead and gets new weights every actor_sync_every
+    # gradient steps
+    actor: bool = False
+    actor_max_lag: int = 8
+    actor_sync_every: int = 20
     extra: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -133,6 +140,9 @@ class TrainConfig:
         ):
             raise ValueError("TrainConfig needs min_stage_timesteps >= 0 and max_stage_timesteps 0 (no cap) or >= "
                              f"min_stage_timesteps, got {self.min_stage_timesteps} and {self.max_stage_timesteps}")
+        if not isinstance(self.actor, bool) or self.actor_max_lag < 1 or self.actor_sync_every < 1:
+            raise ValueError("TrainConfig needs actor true or false, actor_max_lag >= 1 and actor_sync_every >= 1, got "
+                             f"{self.actor!r}, {self.actor_max_lag} and {self.actor_sync_every}")
         if self.tb_images_every < 0:
             raise ValueError(f"TrainConfig.tb_images_every must be >= 0, got {self.tb_images_every}")
 
@@ -188,6 +198,14 @@ def make_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any)
     return gym.make("ShelfSort-v0", num_objects=num_objects or config.start_objects, object_set=config.object_set,
                     primitives=config.primitives, pixel_size=config.pixel_size, safe_picks=config.safe_picks,
                     **kwargs)
+
+
+def make_actor_env(config: TrainConfig, threads: int = 1) -> Any:
+    """The training env of ``config`` in an actor process (`sb3_pixeldqn.actor.ActorVecEnv`, lever 9)."""
+    from sb3_pixeldqn.actor import ActorVecEnv
+
+    return ActorVecEnv(functools.partial(make_env, config), max_lag=config.actor_max_lag,
+                       sync_every=config.actor_sync_every, threads=threads)
 
 
 def env_codec(env: gym.Env | VecEnv) -> ActionCodec:

@@ -144,3 +144,30 @@ def test_init_from_starts_a_new_run_from_trained_weights(tmp_path, capsys):
     assert train.main([*common, "--out", str(tmp_path / "d"), *pick_only]) == 2
     assert "trained with primitives ('pick', 'push')" in capsys.readouterr().err
     assert not (tmp_path / "d").exists()
+
+
+def test_actor_process_trains_checkpoints_and_resumes(tmp_path):
+    # --actor: the env steps come from an actor process; checkpoints, episodes.csv and resume work as
+    # without it, and --amend actor=false turns it off in a resumed run
+    common = ["--out", str(tmp_path), "--learning-starts", "2", "--buffer-size", "200", "--widths", "4", "8", "8",
+              "--checkpoint-minutes", "0", "--threads", "2", "--set", "demo_steps=3"]
+    assert train.main([*common, "--actor", "--max-steps", "6"]) == 0
+    progress = json.loads((tmp_path / "progress.json").read_text())
+    assert progress["timesteps"] == 6 and progress["config"]["actor"] is True
+    session = progress["sessions"][0]
+    assert session["actor"] is True and session["torch_threads"] == 2
+    assert train.main([*common, "--max-steps", "9"]) == 0  # the run's own configuration: still the actor
+    assert train.main([*common, "--max-steps", "11", "--amend", "actor=false"]) == 0
+    progress = json.loads((tmp_path / "progress.json").read_text())
+    assert progress["timesteps"] == 11 and [s["actor"] for s in progress["sessions"]] == [True, True, False]
+    assert progress["amendments"] == [{"timesteps": 9, "changes": {"actor": False}}]
+    with open(tmp_path / "episodes.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == progress["episodes"] and all(int(r["timestep"]) <= 11 for r in rows)
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    model = PixelDoubleDQN.load(tmp_path / "model.zip")
+    model.load_replay_buffer(tmp_path / "replay.pkl")
+    # every consumed step is stored (and relabelled twins) but the one each session stops at (SB3
+    # stops before storing it)
+    assert model.replay_buffer.size() >= 11 - 3 and model.replay_buffer.demonstrations.n_stored >= 3

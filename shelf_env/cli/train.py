@@ -55,15 +55,18 @@ from shelf_env.training import (
     collect_demonstrations,
     demo_policy,
     init_from_checkpoint,
+    make_actor_env,
     make_callbacks,
     make_env,
     make_model,
 )
 
 #: TrainConfig fields ``--amend`` may change in a resumed run: what the curriculum callback reads
-#: when it is built, nothing the saved model or its replay buffer depends on.
+#: when it is built, and how the env steps are collected (in an actor process or not); nothing the
+#: saved model or its replay buffer depends on.
 AMENDABLE = ("max_stage_timesteps", "min_stage_timesteps", "max_objects", "eval_every", "eval_episodes",
-             "eval_max_actions", "eval_actions_per_object", "tb_images_every")
+             "eval_max_actions", "eval_actions_per_object", "tb_images_every", "actor", "actor_max_lag",
+             "actor_sync_every")
 EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
 
 
@@ -106,11 +109,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--amend", dest="amendments", type=parse_set, action="append", default=[], metavar="KEY=VALUE",
                    help=f"change a resumed run's configuration from now on; one of {', '.join(AMENDABLE)}")
     p.add_argument("--uniform-exploration", action="store_true", help="draw exploratory actions uniformly")
+    p.add_argument("--actor", action="store_true",
+                   help="act in a separate process while the learner trains (same as --set actor=true): the actor "
+                        "takes 1 torch thread, the learner --threads minus 1")
     p.add_argument("--init-from", type=pathlib.Path, default=None, metavar="ZIP",
                    help="a new run starts from this checkpoint's weights (same layout and network; its buffer "
                         "is not used); a resumed run continues from its own checkpoint")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    p.add_argument("--threads", type=int, default=2, help="torch CPU threads (actor and learner together)")
     return p.parse_args(argv)
 
 
@@ -130,6 +136,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         changes["widths"] = tuple(args.widths)
     if args.uniform_exploration:
         changes["masked_exploration"] = False
+    if args.actor:
+        changes["actor"] = True
     changes.update(dict(args.overrides))
     return PRESETS[args.preset].replace(**changes)
 
@@ -206,7 +214,8 @@ class BudgetAndCheckpoint(BaseCallback):
               f"N = {(model.curriculum_state or {}).get('value')}", flush=True)
 
 
-def session_record(model: PixelDoubleDQN, progress: dict, threads: int, buffer_kept: bool) -> dict[str, Any]:
+def session_record(model: PixelDoubleDQN, progress: dict, threads: int, buffer_kept: bool,
+                   actor: bool = False) -> dict[str, Any]:
     """Where and when one run of the command started (for the model card's hardware and history)."""
     import datetime
     import os
@@ -216,7 +225,7 @@ def session_record(model: PixelDoubleDQN, progress: dict, threads: int, buffer_k
         "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "timesteps": int(model.num_timesteps), "wall_seconds": float(progress["wall_seconds"]),
         "machine": f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPUs", "torch_threads": int(threads),
-        "device": str(model.device), "buffer_kept": bool(buffer_kept),
+        "device": str(model.device), "buffer_kept": bool(buffer_kept), "actor": bool(actor),
     }
 
 
@@ -341,7 +350,8 @@ def train(args: argparse.Namespace) -> None:
             progress["init_from"] = {"path": str(args.init_from), "sha256": digest}
             print(f"starting from the weights of {args.init_from}", flush=True)
     progress.setdefault("sessions", []).append(session_record(model, progress, args.threads,
-                                                              buffer_kept=(args.out / "replay.pkl").exists()))
+                                                              buffer_kept=(args.out / "replay.pkl").exists(),
+                                                              actor=config.actor))
     demos = demo_policy(config, env)
     buffer = model.replay_buffer
     assert isinstance(buffer, HindsightRelabelReplayBuffer)
@@ -355,8 +365,16 @@ def train(args: argparse.Namespace) -> None:
     if budget.wall_seconds() >= budget.budget_seconds or model.num_timesteps >= args.max_steps:
         print("budget already spent; nothing to do")
         return
+    if config.actor:  # lever 9: from here on the env steps come from an actor process
+        th.set_num_threads(max(1, args.threads - 1))
+        model.set_env(make_actor_env(config))
+        env.close()
+        print(f"acting in an actor process (1 torch thread); the learner has {th.get_num_threads()}", flush=True)
     callbacks = [*make_callbacks(config, seed=args.seed), budget]
-    model.learn(10**9, callback=CallbackList(callbacks), log_interval=5, reset_num_timesteps=not resume)
+    try:
+        model.learn(10**9, callback=CallbackList(callbacks), log_interval=5, reset_num_timesteps=not resume)
+    finally:
+        model.get_env().close()  # type: ignore[union-attr]  # the actor process, if any, ends here
     print(f"done: {model.num_timesteps} steps, {progress['wall_seconds'] / 60:.1f} min, "
           f"curriculum {(model.curriculum_state or {}).get('history')}", flush=True)
 
