@@ -104,7 +104,7 @@ class ActorVecEnv(VecEnv):
         child.close()
         self._pending: deque[Transition] = deque()
         self._running = False
-        self._configured = False
+        self._policy: Any = None  # the policy the actor holds a copy of
         self._synced_updates = 0  # the learner's gradient steps when weights were last sent
         self._synced_rules: ActingRules | None = None  # the acting rules last sent
         self.closed = False
@@ -160,14 +160,14 @@ class ActorVecEnv(VecEnv):
 
     def update(self, policy: Any, n_updates: int, rules: ActingRules, seed: int | None) -> None:
         """Give the actor the model's current policy and acting rules when due: the network on the
-        first call, its weights every ``sync_every`` gradient steps, ε when it moved by more than
-        ``EPSILON_SYNC`` or the warm-up ended."""
-        if not self._configured:
+        first call (or for another policy than last time), its weights every ``sync_every``
+        gradient steps, ε when it moved by more than ``EPSILON_SYNC`` or the warm-up ended."""
+        if self._policy is not policy:  # the first call, or another model took this env: its network
             self._request("configure", {
                 "policy_class": type(policy), "policy_kwargs": policy._get_constructor_parameters(),
                 "weights": _weights(policy), "rules": rules, "seed": seed,
             })
-            self._configured = True
+            self._policy = policy
         else:
             assert self._synced_rules is not None  # set with the configuration
             new_weights = n_updates - self._synced_updates >= self.sync_every
@@ -181,7 +181,7 @@ class ActorVecEnv(VecEnv):
 
     def act(self) -> None:
         """Start acting (after `update` configured the policy); a no-op while acting."""
-        if not self._configured:
+        if self._policy is None:
             raise RuntimeError("ActorVecEnv.act needs the policy first (update)")
         if not self._running:
             self._request("run")

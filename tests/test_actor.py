@@ -1,5 +1,6 @@
 """`ActorVecEnv`: an actor process that plays the model's policy while `PixelDoubleDQN` learns."""
 
+import copy
 import time
 
 import numpy as np
@@ -111,6 +112,15 @@ def test_actions_stay_in_the_mask_and_next_masks_are_stored(actor_envs):
     next_obs, stored = batch.next_observations, batch.next_masks
     expected = np.stack([np.tile(o[0].reshape(-1) > 0, 3) for o in next_obs])
     assert np.array_equal(stored, expected)
+    # another model given the same env: the actor acts with that model's network from its first step
+    other = PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=maps, widths=(4, 8, 8)), learning_starts=0,
+                           exploration_initial_eps=0.0, exploration_final_eps=0.0, buffer_size=500, seed=2)
+    initial = copy.deepcopy(other.policy)
+    recorder = ActionRecorder()
+    other.learn(3, callback=recorder)
+    obs, action = recorder.seen[0]
+    mask = np.tile(obs[0].reshape(-1) > 0, 3)
+    assert action == int(initial.predict(obs, deterministic=True, action_masks=mask)[0])
 
 
 def test_curriculum_leaves_out_the_old_stages_episodes_still_in_flight(actor_envs):
