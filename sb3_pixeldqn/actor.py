@@ -34,6 +34,9 @@ from __future__ import annotations
 
 import functools
 import multiprocessing as mp
+import pickle
+import queue
+import threading
 import traceback
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -95,10 +98,14 @@ class ActorVecEnv(VecEnv):
         self.max_lag = max_lag
         self.sync_every = sync_every
         ctx: Any = mp.get_context(start_method)
-        self._remote, child = ctx.Pipe()
+        # Commands go down a pipe that a thread of the actor process always drains, and everything
+        # the actor sends comes back through a queue whose feeder thread never blocks the actor: a
+        # large message each way (weights down, transitions up) can then never deadlock.
+        child, self._remote = ctx.Pipe(duplex=False)
+        self._messages = ctx.Queue()
         self._consumed = ctx.Value("q", 0)
-        self._process = ctx.Process(target=_actor_main,
-                                    args=(child, CloudpickleWrapper(env_fn), self._consumed, max_lag, threads),
+        self._process = ctx.Process(target=_actor_main, args=(child, self._messages, CloudpickleWrapper(env_fn),
+                                                              self._consumed, max_lag, threads),
                                     daemon=True, name="ActorVecEnv")
         self._process.start()
         child.close()
@@ -119,15 +126,14 @@ class ActorVecEnv(VecEnv):
     def _recv(self) -> tuple[str, Any]:
         if self.closed:
             raise RuntimeError("ActorVecEnv is closed")
-        while not self._remote.poll(POLL_SECONDS):
-            if not self._process.is_alive():
-                self.closed = True
-                raise RuntimeError(f"the actor process died (exit code {self._process.exitcode})")
-        try:
-            kind, payload = self._remote.recv()
-        except EOFError as err:
-            self.closed = True
-            raise RuntimeError(f"the actor process died (exit code {self._process.exitcode})") from err
+        while True:
+            try:
+                kind, payload = self._messages.get(timeout=POLL_SECONDS)
+                break
+            except queue.Empty:
+                if not self._process.is_alive():
+                    self.closed = True
+                    raise RuntimeError(f"the actor process died (exit code {self._process.exitcode})") from None
         if kind == "error":
             self._running = False  # the actor stops acting after an error
             error, trace = payload
@@ -243,6 +249,8 @@ class ActorVecEnv(VecEnv):
             self._process.terminate()
             self._process.join(timeout=5)
         self._remote.close()
+        self._messages.cancel_join_thread()
+        self._messages.close()
         self.closed = True
 
     def _check_indices(self, indices: VecEnvIndices) -> list[int]:
@@ -285,9 +293,10 @@ def _weights(policy: Any) -> dict[str, np.ndarray]:
 class _Actor:
     """The actor process's state: its env, the policy copy, the acting rules and counters."""
 
-    def __init__(self, env: gym.Env, remote: Connection, consumed: Any, max_lag: int) -> None:
+    def __init__(self, env: gym.Env, commands: queue.Queue, messages: Any, consumed: Any, max_lag: int) -> None:
         self.env = env
-        self.remote = remote
+        self.commands = commands
+        self.messages = messages
         self.consumed = consumed
         self.max_lag = max_lag
         self.obs: np.ndarray | None = None
@@ -306,7 +315,6 @@ class _Actor:
         env = self.env
         reply: Any = None
         if command == "close":
-            env.close()
             return False
         if command == "spaces":
             reply = (env.observation_space, env.action_space)
@@ -349,7 +357,7 @@ class _Actor:
             reply = is_wrapped(env, payload)
         else:
             raise ValueError(f"unknown actor command {command!r}")
-        self.remote.send(("reply", reply))
+        self.messages.put(("reply", reply))
         return True
 
     def load(self, weights: dict[str, np.ndarray], th: Any) -> None:
@@ -394,21 +402,25 @@ class _Actor:
         action = self.choose()
         before, obs, reward, done, info, next_mask = self.step(action)
         self.produced += 1
-        self.remote.send(("transition", Transition(
+        self.messages.put(("transition", Transition(
             before[None], np.array([action], dtype=np.int64), np.asarray(obs)[None],
             np.array([reward], dtype=np.float32), np.array([done]), info,
             None if next_mask is None else next_mask[None])))
 
     def loop(self) -> None:
+        """Act while running and less than ``max_lag`` ahead; run each command as it comes."""
         while True:
-            if self.running:
-                ahead = self.produced - self.consumed.value
-                if not self.remote.poll(0 if ahead < self.max_lag else 0.002):
-                    if ahead < self.max_lag:
-                        self.guarded(self.act)
-                    continue
-            command, payload = self.remote.recv()
-            if not self.guarded(functools.partial(self.handle, command, payload)):
+            ready = self.running and self.produced - self.consumed.value < self.max_lag
+            try:
+                if ready:
+                    command, payload = self.commands.get_nowait()
+                else:
+                    command, payload = self.commands.get(timeout=0.002 if self.running else None)
+            except queue.Empty:
+                if ready:
+                    self.guarded(self.act)
+                continue
+            if command == _EOF or not self.guarded(functools.partial(self.handle, command, payload)):
                 return
 
     def guarded(self, fn: Callable[[], Any]) -> Any:
@@ -419,20 +431,42 @@ class _Actor:
         except Exception as err:  # noqa: BLE001  (raised again in the learner)
             self.running = False
             trace = traceback.format_exc()
-            try:
-                self.remote.send(("error", (err, trace)))
-            except Exception:  # noqa: BLE001  (an exception that does not pickle)
-                self.remote.send(("error", (RuntimeError(f"{type(err).__name__}: {err}"), trace)))
+            self.messages.put(("error", (_picklable(err), trace)))
             return True
 
 
-def _actor_main(remote: Connection, env_fn: CloudpickleWrapper, consumed: Any, max_lag: int, threads: int) -> None:
-    """The actor process: build the env, then serve commands and act until ``close``."""
+def _picklable(err: Exception) -> Exception:
+    """``err``, or a RuntimeError naming it when it does not pickle (the queue pickles in a thread,
+    where a failure would be lost)."""
+    try:
+        pickle.loads(pickle.dumps(err))
+        return err
+    except Exception:  # noqa: BLE001
+        return RuntimeError(f"{type(err).__name__}: {err}")
+
+
+#: What the actor's command reader queues when the learner's end of the pipe is gone.
+_EOF = "_eof"
+
+
+def _read_commands(remote: Connection, commands: queue.Queue) -> None:
+    """The actor's reader thread: move every command from the pipe to ``commands`` at once."""
+    try:
+        while True:
+            commands.put(remote.recv())
+    except (EOFError, OSError):
+        commands.put((_EOF, None))
+
+
+def _actor_main(remote: Connection, messages: Any, env_fn: CloudpickleWrapper, consumed: Any, max_lag: int,
+                threads: int) -> None:
+    """The actor process: build the env, then serve commands and act until ``close`` (or the learner is gone)."""
     import torch as th
     from stable_baselines3.common.env_util import is_wrapped
     from stable_baselines3.common.monitor import Monitor
 
     th.set_num_threads(threads)
+    messages.cancel_join_thread()  # exit even when the learner never reads what is left
     try:
         env = env_fn.var()
         if not isinstance(env, gym.Env):
@@ -440,15 +474,13 @@ def _actor_main(remote: Connection, env_fn: CloudpickleWrapper, consumed: Any, m
         if not is_wrapped(env, Monitor):
             env = Monitor(env)
     except Exception as err:  # noqa: BLE001  (raised again in the learner)
-        try:
-            remote.send(("error", (err, traceback.format_exc())))
-        except Exception:  # noqa: BLE001
-            failure = RuntimeError(f"env_fn failed: {type(err).__name__}: {err}")
-            remote.send(("error", (failure, traceback.format_exc())))
+        messages.put(("error", (_picklable(err), traceback.format_exc())))
         return
+    commands: queue.Queue = queue.Queue()
+    threading.Thread(target=_read_commands, args=(remote, commands), daemon=True).start()
     try:
-        _Actor(env, remote, consumed, max_lag).loop()
-    except (EOFError, BrokenPipeError, KeyboardInterrupt):  # the learner is gone
+        _Actor(env, commands, messages, consumed, max_lag).loop()
+    finally:
         env.close()
 
 

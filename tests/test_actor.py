@@ -1,6 +1,7 @@
 """`ActorVecEnv`: an actor process that plays the model's policy while `PixelDoubleDQN` learns."""
 
 import copy
+import signal
 import time
 
 import numpy as np
@@ -81,6 +82,27 @@ def test_learns_the_square_with_an_actor_process(actor_envs):
     assert hits / 50 >= 0.8
     stats = env.stats()
     assert stats["consumed"] == 500 and stats["produced"] - stats["consumed"] <= 4  # never more than max_lag ahead
+
+
+def test_large_messages_both_ways_do_not_deadlock(actor_envs):
+    # weights (~1 MB, the default widths) going down every gradient step while transitions of
+    # ~250 KB come up, 8 at a time: more than a pipe holds either way. With one pipe both ends could
+    # block in send; the actor's command reader and its queue must keep both moving.
+    env = actor_envs(lambda: FindTheSquareEnv(shape=(4, 120, 160)), max_lag=8, sync_every=1)
+    model = PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=(("pick", 0),)), learning_starts=8, batch_size=4,
+                           buffer_size=100, seed=0)
+
+    def hung(*_):
+        raise TimeoutError("PixelDoubleDQN.learn on an ActorVecEnv hung")
+
+    previous = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(120)
+    try:
+        model.learn(40)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+    assert model.num_timesteps == 40 and model._n_updates == 40 - 8
 
 
 class ActionRecorder(BaseCallback):
