@@ -24,6 +24,11 @@ size and network; online and target networks; not its buffer), e.g. to fine-tune
 under another configuration (``--set safe_picks=true``); ``progress.json`` records the file's
 sha256. A resumed run continues from its own checkpoint.
 
+``--actor`` (``--set actor=true``; amendable) steps the env in an actor process
+(`sb3_pixeldqn.actor.ActorVecEnv`) while the learner trains: the actor takes one torch thread and
+the learner ``--threads`` minus one (docs/learning.md, lever 9). Demonstrations are collected on an
+in-process env before it starts.
+
 ``--mirror DIR`` keeps a copy of everything but the replay buffer (``model.zip``,
 ``progress.json``, ``episodes.csv``, ``tb/``) in ``DIR`` after every checkpoint, for committing.
 A run whose ``--out`` has no checkpoint (a fresh machine) starts from that copy: it resumes from
