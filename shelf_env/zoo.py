@@ -145,6 +145,9 @@ class RecipeCallback(BaseCallback):
         model = self.model
         assert isinstance(model, PixelDoubleDQN), "RecipeCallback trains a PixelDoubleDQN"
         config = self._config()
+        if config.actor:
+            raise ValueError("actor: true in the yml, but rl-zoo3 builds and steps its own envs; train with "
+                             "`shelf-train --actor` for an actor process, or set actor: false")
         model.augment = augmentations(config, env_codec(self.training_env))
         buffer = model.replay_buffer
         assert isinstance(buffer, HindsightRelabelReplayBuffer)

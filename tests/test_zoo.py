@@ -13,7 +13,7 @@ import yaml
 pytest.importorskip("rl_zoo3", reason="the zoo extra: pip install '.[zoo]'")
 
 from sb3_pixeldqn import PixelDoubleDQN  # noqa: E402
-from shelf_env.training import PRESETS  # noqa: E402
+from shelf_env.training import PRESETS, make_env  # noqa: E402
 from shelf_env.zoo import HYPERPARAMS, RecipeCallback, write_hyperparams, zoo_hyperparams  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -65,3 +65,9 @@ def test_recipe_callback_refuses_fields_no_run_could_use():
     callback = RecipeCallback(gate="sometimes")
     with pytest.raises(ValueError, match="gate must be one of"):
         PRESETS["recipe"].replace(**callback.fields)
+    # the actor process is shelf-train's: under rl-zoo3 it would be silently ignored, so it is refused
+    model = PixelDoubleDQN("FCNPolicy", make_env(PRESETS["recipe"]), policy_kwargs=dict(widths=(4, 8, 8)))
+    actor = RecipeCallback(verbose=0, actor=True)
+    actor.init_callback(model)
+    with pytest.raises(ValueError, match="shelf-train --actor"):
+        actor.on_training_start({}, {})
