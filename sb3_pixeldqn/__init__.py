@@ -4,6 +4,7 @@
 ``Box(0, 255, (C, H, W), uint8)`` observation and a ``Discrete(n_maps * H * W)`` action space.
 """
 
+from sb3_pixeldqn.actor import ActorVecEnv
 from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer
 from sb3_pixeldqn.callbacks import CurriculumCallback, QMapImageCallback
 from sb3_pixeldqn.pixel_dqn import PixelDoubleDQN
@@ -12,6 +13,7 @@ from sb3_pixeldqn.policies import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, FCNPolicy
 __all__ = [
     "PICK_AND_PUSH_MAPS",
     "PICK_ONLY_MAPS",
+    "ActorVecEnv",
     "CurriculumCallback",
     "FCNPolicy",
     "HindsightRelabelReplayBuffer",

@@ -28,6 +28,11 @@ action, next_obs, next_mask)`` applied to every sampled transition, each drawing
 of a symmetry group of the task. The algorithm knows nothing of what they mean; an env package
 supplies them (`shelf_env.symmetry`).
 
+**An actor process** (`sb3_pixeldqn.actor.ActorVecEnv` as the env): the env steps in a second
+process that plays this model's ε-greedy masked policy with a copy of its weights, refreshed every
+few gradient steps, while the learner trains; `collect_rollouts` consumes those transitions
+instead of stepping the env itself, at the same replay ratio.
+
 Exploration is ε-greedy with ε annealed linearly from ``exploration_initial_eps`` to
 ``exploration_final_eps`` over ``exploration_timesteps`` steps of the current *stage*;
 `restart_exploration` starts a new stage (the curriculum calls it when N grows). A masked
