@@ -161,7 +161,7 @@ def plot_curves(rows: list[dict[str, Any]], png: pathlib.Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(9, 4.5))
-    for r in rows:
+    for i, r in enumerate(rows):
         history = r["curriculum"].get("greedy_history", [])
         if not history:
             continue
@@ -169,7 +169,9 @@ def plot_curves(rows: list[dict[str, Any]], png: pathlib.Path) -> None:
         rate = np.array([h[2] for h in history]) * 100
         n = np.array([h[1] for h in history])
         minutes = steps / max(1, r["env_steps"]) * r["wall_seconds"] / 60  # steps -> minutes, linearly
-        (line,) = ax.plot(minutes, rate, marker=".", ms=3, label=f"{r['row']} s{r['seed']}")
+        # 20 colours, and dashes from the 11th row on, so that no two rows look alike
+        (line,) = ax.plot(minutes, rate, marker=".", ms=3, label=f"{r['row']} s{r['seed']}",
+                          color=plt.get_cmap("tab20")(i % 20), linestyle=("-", "--", ":")[(i // 10) % 3])
         at3 = n == 3
         ax.plot(minutes[at3], rate[at3], "o", ms=4, color=line.get_color())
     ax.set_xlabel("wall-clock minutes (approx., from steps)")
