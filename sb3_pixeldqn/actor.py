@@ -131,7 +131,7 @@ class ActorVecEnv(VecEnv):
                 kind, payload = self._messages.get(timeout=POLL_SECONDS)
                 break
             except queue.Empty:
-                if not self._process.is_alive():
+                if not self._process.is_alive() and self._messages.empty():  # its last words arrive first
                     self.closed = True
                     raise RuntimeError(f"the actor process died (exit code {self._process.exitcode})") from None
         if kind == "error":
@@ -466,7 +466,6 @@ def _actor_main(remote: Connection, messages: Any, env_fn: CloudpickleWrapper, c
     from stable_baselines3.common.monitor import Monitor
 
     th.set_num_threads(threads)
-    messages.cancel_join_thread()  # exit even when the learner never reads what is left
     try:
         env = env_fn.var()
         if not isinstance(env, gym.Env):
@@ -475,7 +474,10 @@ def _actor_main(remote: Connection, messages: Any, env_fn: CloudpickleWrapper, c
             env = Monitor(env)
     except Exception as err:  # noqa: BLE001  (raised again in the learner)
         messages.put(("error", (_picklable(err), traceback.format_exc())))
+        messages.close()
+        messages.join_thread()  # the error must reach the learner before this process exits
         return
+    messages.cancel_join_thread()  # from here on, exit even when the learner never reads what is left
     commands: queue.Queue = queue.Queue()
     threading.Thread(target=_read_commands, args=(remote, commands), daemon=True).start()
     try:
