@@ -46,6 +46,9 @@ from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
+import torch as th
+from stable_baselines3.common.env_util import is_wrapped
+from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import CloudpickleWrapper, VecEnvIndices, VecEnvStepReturn
 
@@ -182,7 +185,8 @@ class ActorVecEnv(VecEnv):
                 return
             self._send("sync", {"weights": _weights(policy) if new_weights else None, "rules": rules})
             if not new_weights:
-                n_updates = self._synced_updates
+                self._synced_rules = rules
+                return
         self._synced_updates, self._synced_rules = n_updates, rules
 
     def act(self) -> None:
@@ -306,12 +310,12 @@ class _Actor:
         self.rng = np.random.default_rng()
         self.running = False
         self.produced = 0
+        from sb3_pixeldqn.pixel_dqn import draw_masked_action  # here: pixel_dqn imports this module
+
+        self.draw_masked = draw_masked_action
 
     def handle(self, command: str, payload: Any) -> bool:
         """Run one command; False for ``close``."""
-        import torch as th
-        from stable_baselines3.common.env_util import is_wrapped
-
         env = self.env
         reply: Any = None
         if command == "close":
@@ -321,12 +325,12 @@ class _Actor:
         elif command == "configure":
             self.policy = payload["policy_class"](**payload["policy_kwargs"]).to("cpu")
             self.policy.set_training_mode(False)
-            self.load(payload["weights"], th)
+            self.load(payload["weights"])
             self.rules = payload["rules"]
             self.rng = np.random.default_rng(payload["seed"])
         elif command == "sync":  # no reply: the learner does not wait for it
             if payload["weights"] is not None:
-                self.load(payload["weights"], th)
+                self.load(payload["weights"])
             self.rules = payload["rules"]
             return True
         elif command == "run":
@@ -360,7 +364,7 @@ class _Actor:
         self.messages.put(("reply", reply))
         return True
 
-    def load(self, weights: dict[str, np.ndarray], th: Any) -> None:
+    def load(self, weights: dict[str, np.ndarray]) -> None:
         self.policy.q_net.load_state_dict({k: th.from_numpy(v) for k, v in weights.items()})
 
     def step(self, action: int) -> tuple[np.ndarray, np.ndarray, float, bool, dict[str, Any], np.ndarray | None]:
@@ -385,15 +389,13 @@ class _Actor:
 
     def choose(self) -> int:
         """The model's ε-greedy action in the current state, within the masks the rules use."""
-        from sb3_pixeldqn.pixel_dqn import draw_masked_action
-
         rules = self.rules
         assert rules is not None and self.obs is not None
         if (rules.masked or rules.masked_exploration) and self.mask is None:
             self.mask = np.asarray(self.env.get_wrapper_attr("action_masks")(), dtype=bool)
         if rules.explore_all or self.rng.random() < rules.epsilon:
             if rules.masked_exploration:
-                return draw_masked_action(self.mask, rules.n_maps, self.rng)  # type: ignore[arg-type]
+                return self.draw_masked(self.mask, rules.n_maps, self.rng)  # type: ignore[arg-type]
             return int(self.rng.integers(int(self.env.action_space.n)))  # type: ignore[attr-defined]
         masks = self.mask[None] if rules.masked else None  # type: ignore[index]
         return int(np.asarray(self.policy.predict(self.obs[None], deterministic=True, action_masks=masks)[0])[0])
@@ -461,10 +463,6 @@ def _read_commands(remote: Connection, commands: queue.Queue) -> None:
 def _actor_main(remote: Connection, messages: Any, env_fn: CloudpickleWrapper, consumed: Any, max_lag: int,
                 threads: int) -> None:
     """The actor process: build the env, then serve commands and act until ``close`` (or the learner is gone)."""
-    import torch as th
-    from stable_baselines3.common.env_util import is_wrapped
-    from stable_baselines3.common.monitor import Monitor
-
     th.set_num_threads(threads)
     try:
         env = env_fn.var()
