@@ -8,7 +8,8 @@ Per seed: SR = % of runs sorted in fewer than ``max_actions`` (40) actions; over
 only, AE = N / actions and mAE = (objects unsorted at the start) / actions. Per N: mean and
 standard deviation of the per-seed values over seeds (Fig. 10).
 
-Policies are named by a string: ``"h-d"``, ``"h-a"``, ``"random"`` or the path of a
+Policies are named by a string: ``"h-d"``, ``"h-a"``, ``"random"``, the privileged diagnostics
+``"h-d-lookahead"`` and ``"h-a-lookahead"`` (`shelf_env.lookahead`) or the path of a
 `PixelDoubleDQN` zip (P+S or S; the env layout follows the checkpoint). `check_policy` validates a
 name before any work starts.
 """
@@ -33,8 +34,11 @@ from sb3_pixeldqn.buffers import unchanged
 from sb3_pixeldqn.files import write_atomically, write_json_atomically
 from shelf_env import params
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
+from shelf_env.lookahead import LookaheadAccessibility, LookaheadDistance
 
-HEURISTICS = {"h-d": DistanceHeuristic, "h-a": AccessibilityHeuristic}
+HEURISTICS = {"h-d": DistanceHeuristic, "h-a": AccessibilityHeuristic,
+              # privileged diagnostics (they read the simulator), not baselines: shelf_env.lookahead
+              "h-d-lookahead": LookaheadDistance, "h-a-lookahead": LookaheadAccessibility}
 #: Evaluation seed of the held-out scenes behind learning claims (docs/learning.md): no training
 #: run, greedy curriculum check or tuning probe draws scenes from it.
 HELDOUT_SEED = 1000

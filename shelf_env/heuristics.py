@@ -198,22 +198,29 @@ class PickHeuristic(ObservationPolicy):
         row, col = self.choose(view)
         return self._pick(row, col)
 
-    def choose(self, view: ObservationView) -> tuple[int, int]:
+    def score(self, view: ObservationView) -> np.ndarray:
+        """(H, W) preference of each candidate cell (graspable, of an unsorted object); -inf elsewhere."""
         raise NotImplementedError
+
+    def choose(self, view: ObservationView) -> tuple[int, int]:
+        """The best-scoring candidate cell; the front-most object when every visible one is sorted."""
+        score = self.score(view)
+        if not np.isfinite(score).any():
+            return _front_most(view.graspable)
+        row, col = np.unravel_index(int(np.argmax(score)), score.shape)
+        return int(row), int(col)
 
 
 class DistanceHeuristic(PickHeuristic):
     """H-d: pick the graspable cell of an unsorted object farthest from its class's target region
     (front-most on ties); if every visible object is sorted, the front-most object."""
 
-    def choose(self, view: ObservationView) -> tuple[int, int]:
+    def score(self, view: ObservationView) -> np.ndarray:
+        # ties: the front-most cell. Distinct distances (square roots of integers below 2 * 120^2)
+        # differ by more than 1e-3, so the 1e-6-per-row bonus only breaks ties.
+        rows = np.arange(self.rows)[:, None] * np.ones((1, self.cols))
         candidates = view.graspable & ~view.sorted_cells
-        if not candidates.any():
-            return _front_most(view.graspable)
-        dist = np.where(candidates, view.distance_to_region(), -1.0)
-        rows, cols = np.nonzero(dist == dist.max())
-        i = int(np.argmax(rows))  # ties: the front-most cell
-        return int(rows[i]), int(cols[i])
+        return np.where(candidates, view.distance_to_region() + 1e-6 * rows, -np.inf)
 
 
 class AccessibilityHeuristic(PickHeuristic):
@@ -225,14 +232,10 @@ class AccessibilityHeuristic(PickHeuristic):
         super().__init__(env)
         self.front_weight = front_weight
 
-    def choose(self, view: ObservationView) -> tuple[int, int]:
+    def score(self, view: ObservationView) -> np.ndarray:
         candidates = view.graspable & ~view.sorted_cells
-        if not candidates.any():
-            return _front_most(view.graspable)
         rows = np.arange(self.rows)[:, None] * np.ones((1, self.cols))  # row index = distance from the back
-        score = np.where(candidates, view.distance_to_region() + self.front_weight * rows, -np.inf)
-        row, col = np.unravel_index(int(np.argmax(score)), score.shape)
-        return int(row), int(col)
+        return np.where(candidates, view.distance_to_region() + self.front_weight * rows, -np.inf)
 
 
 def _front_most(cells: np.ndarray) -> tuple[int, int]:

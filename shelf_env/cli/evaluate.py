@@ -3,7 +3,8 @@
     shelf-evaluate --policies h-d h-a random --ns 3-14 --runs 20 --seeds 2 \\
         --object-sets ycb --out results/baselines --workers 2
 
-Policies: ``h-d``, ``h-a``, ``random`` or a PixelDoubleDQN checkpoint zip (its P+S or S layout
+Policies: ``h-d``, ``h-a``, ``random``, the privileged diagnostics ``h-d-lookahead`` and
+``h-a-lookahead`` (`shelf_env.lookahead`) or a PixelDoubleDQN checkpoint zip (its P+S or S layout
 decides the env's primitives). Every (policy, object set, N, seed) cell runs in a worker process
 and is written to ``<out>/cells/`` as soon as it finishes; running the same command again skips
 the cells already on disk, so an interrupted evaluation resumes. A checkpoint's cells are named
@@ -71,7 +72,8 @@ def json_object(text: str) -> dict:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="shelf-evaluate", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--policies", nargs="+", required=True, help="h-d, h-a, random or checkpoint .zip paths")
+    p.add_argument("--policies", nargs="+", required=True, help="h-d, h-a, random, h-d-lookahead, h-a-lookahead "
+                                                                 "or checkpoint .zip paths")
     p.add_argument("--ns", type=parse_ns, default=list(range(3, 15)), help="e.g. 3-14 or 3,5,8")
     p.add_argument("--runs", type=int, default=100, help="episodes per (policy, N, seed) (paper: 100)")
     p.add_argument("--seeds", type=int, default=5, help="number of seeds, 0..S-1 (paper: 5)")
