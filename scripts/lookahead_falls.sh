@@ -13,3 +13,5 @@ bash scripts/setup.sh >/dev/null
 shelf-evaluate --policies h-d h-a h-d-lookahead h-a-lookahead --ns 5,8,11 --runs 30 --seeds 1 \
     --object-sets ycb --out results/lookahead --reuse-cells results/models "$@"
 python -m shelf_env.report results/lookahead --learned h-a-lookahead --pick-only h-d-lookahead
+# what the lookahead episodes that still fell dropped, and in which phase (results/lookahead/falls.md)
+python -m shelf_env.traces results/lookahead --policies h-d-lookahead h-a-lookahead --ns 8 --limit 6
