@@ -13,6 +13,7 @@ from shelf_env import evaluation as ev
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
 from shelf_env.lookahead import LookaheadAccessibility, LookaheadDistance, probe_step
 from shelf_env.world import Region
+from tests.conftest import REGIONS
 from tests.test_closed_loop import DRAG_SCENE
 
 # the drag scene's boxes, both misplaced: H-d goes for the back one first (farther from its region),
@@ -42,43 +43,31 @@ def test_probe_reports_exactly_what_the_step_does_and_leaves_the_env_untouched()
         env.close()
 
 
-def test_lookahead_vetoes_the_pick_that_drags_the_neighbour_out():
-    env = gym.make("ShelfSort-v0", num_objects=2).unwrapped
-    try:
-        env.reset(seed=0)
-        obs, _ = env.set_scene(SCENE, DRAG_REGIONS)
-        plain = int(DistanceHeuristic(env).predict(obs)[0])
-        assert probe_step(env, plain).fell  # H-d's own choice drops the front box
-        look = LookaheadDistance(env)
-        action = int(look.predict(obs)[0])
-        _, row, col = env.decode_action(action)
-        assert abs(env.codec.cell_centre(row, col)[0] - 0.06) < 0.04  # the front box instead
-        assert look.stats == {"decisions": 1, "probes": 2, "vetoes": 1, "unavoidable": 0}
-        _, reward, _, _, info = env.step(action)
-        assert not info["fell"] and reward != -10 and len(env.world.objects) == 2
-    finally:
-        env.close()
+def test_lookahead_vetoes_the_pick_that_drags_the_neighbour_out(env):
+    obs, _ = env.set_scene(SCENE, DRAG_REGIONS)
+    plain = int(DistanceHeuristic(env).predict(obs)[0])
+    assert probe_step(env, plain).fell  # H-d's own choice drops the front box
+    look = LookaheadDistance(env)
+    action = int(look.predict(obs)[0])
+    _, row, col = env.decode_action(action)
+    assert abs(env.codec.cell_centre(row, col)[0] - 0.06) < 0.04  # the front box instead
+    assert look.stats == {"decisions": 1, "probes": 2, "vetoes": 1, "unavoidable": 0}
+    _, reward, _, _, info = env.step(action)
+    assert not info["fell"] and reward != -10 and len(env.world.objects) == 2
 
 
-def test_lookahead_keeps_the_base_choice_when_it_is_valid_or_nothing_is():
-    env = gym.make("ShelfSort-v0", num_objects=2).unwrapped
-    try:
-        env.reset(seed=0)
-        # only the back box is misplaced: its carry drops the front one, and there is no other pick
-        obs, _ = env.set_scene([(DRAG_SCENE[0][0], 0, 0.30, 0.0, 0.0), (DRAG_SCENE[1][0], 1, 0.06, 0.0, 0.0)],
-                               [Region(0.0, 0.40, 0.12, 0.30), Region(0.0, 0.40, -0.09, 0.09),
-                                Region(0.0, 0.40, -0.30, -0.12)])
-        look = LookaheadAccessibility(env)
-        assert int(look.predict(obs)[0]) == int(AccessibilityHeuristic(env).predict(obs)[0])
-        assert look.stats == {"decisions": 1, "probes": 1, "vetoes": 0, "unavoidable": 1}
-        obs, _ = env.reset(seed=5)  # a random scene whose first H-a pick is fine: no veto, one probe
-        look = LookaheadAccessibility(env)
-        action = int(look.predict(obs)[0])
-        assert probe_step(env, action).valid
-        assert action == int(AccessibilityHeuristic(env).predict(obs)[0])
-        assert look.stats == {"decisions": 1, "probes": 1, "vetoes": 0, "unavoidable": 0}
-    finally:
-        env.close()
+def test_lookahead_keeps_the_base_choice_when_it_is_valid_or_nothing_is(env):
+    # only the back box is misplaced: its carry drops the front one, and there is no other pick
+    obs, _ = env.set_scene([(DRAG_SCENE[0][0], 0, 0.30, 0.0, 0.0), (DRAG_SCENE[1][0], 1, 0.06, 0.0, 0.0)], REGIONS)
+    look = LookaheadAccessibility(env)
+    assert int(look.predict(obs)[0]) == int(AccessibilityHeuristic(env).predict(obs)[0])
+    assert look.stats == {"decisions": 1, "probes": 1, "vetoes": 0, "unavoidable": 1}
+    obs, _ = env.reset(seed=5, options={"num_objects": 2})  # its first H-a pick is fine: one probe
+    look = LookaheadAccessibility(env)
+    action = int(look.predict(obs)[0])
+    assert probe_step(env, action).valid
+    assert action == int(AccessibilityHeuristic(env).predict(obs)[0])
+    assert look.stats == {"decisions": 1, "probes": 1, "vetoes": 0, "unavoidable": 0}
 
 
 def test_lookahead_policies_are_named_policies_of_the_evaluation():
