@@ -4,7 +4,8 @@
 # first tried in an exact forked copy of the env, and picks that drop an object are vetoed when
 # another visible object's pick does not), the same scenes as issue 10 (seed 0 at N = 5, 8, 11,
 # 30 runs; the H-d and H-a cells are copied from results/models). A lookahead episode that still
-# ends with a fall met a state where every visible unsorted object's pick drops something.
+# ends with a fall met a state where every visible unsorted object's pick drops something (or where
+# every visible object looked sorted: the heuristic's one uncovering pick is not second-guessed).
 # Resumable; extra arguments go to shelf-evaluate (e.g. --ns 3-14 --seeds 3 for issue 10's grid).
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -11,8 +11,10 @@ candidate whose step leaves the scene valid (nothing fell, everything at rest); 
 candidate would end the episode invalid, it takes the base heuristic's own choice.
 
 So with ``max_probes`` covering every candidate, an episode of the lookahead policy ends with a fall
-only where *every* pick of a visible unsorted object would have dropped something: its fall rate
-on the evaluation scenes is the rate of falls that no choice of pick at that step avoids. It is a
+only where *every* pick of a visible unsorted object would have dropped something, or where every
+visible object looks sorted (the base heuristic's one uncovering pick, the front-most object, is
+then taken unprobed): its fall rate on the evaluation scenes bounds from above the rate of falls
+that no choice among these picks at that step avoids. It is a
 diagnostic and a privileged teacher, not a baseline of the paper: it reads the simulator, which a
 real robot cannot fork.
 
