@@ -4,8 +4,9 @@
 # first tried in an exact forked copy of the env, and picks that drop an object are vetoed when
 # another visible object's pick does not), the same scenes as issue 10 (seed 0 at N = 5, 8, 11,
 # 30 runs; the H-d and H-a cells are copied from results/models). A lookahead episode that still
-# ends with a fall met a state where every visible unsorted object's pick drops something (or where
-# every visible object looked sorted: the heuristic's one uncovering pick is not second-guessed).
+# ends with a fall met a state where every visible unsorted object's pick drops something, or where
+# every visible object looked sorted and every visible object's uncovering pick drops something;
+# results/lookahead/invalid_steps.md counts which.
 # Resumable; extra arguments go to shelf-evaluate (e.g. --ns 3-14 --seeds 3 for issue 10's grid).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -14,5 +15,7 @@ bash scripts/setup.sh >/dev/null
 shelf-evaluate --policies h-d h-a h-d-lookahead h-a-lookahead --ns 5,8,11 --runs 30 --seeds 1 \
     --object-sets ycb --out results/lookahead --reuse-cells results/models "$@"
 python -m shelf_env.report results/lookahead --learned h-a-lookahead --pick-only h-d-lookahead
+# at which kind of step the lookahead's invalid episodes ended (results/lookahead/invalid_steps.md)
+python -m shelf_env.lookahead results/lookahead
 # what the lookahead episodes that still fell dropped, and in which phase (results/lookahead/falls.md)
 python -m shelf_env.traces results/lookahead --policies h-d-lookahead h-a-lookahead --ns 8 --limit 6

@@ -24,7 +24,7 @@ import json
 import math
 import os
 import pathlib
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -63,6 +63,9 @@ class EpisodeRecord:
     #: before this field existed).
     failure: str = ""
     max_repeat: int = 0  # longest run of one action repeated back to back
+    #: The episode's share of the policy's own counters, for a policy with a ``stats`` dict of ints
+    #: (the lookahead's vetoes and unavoidable steps, `shelf_env.lookahead.STAT_KEYS`); empty otherwise.
+    policy_stats: dict[str, int] = field(default_factory=dict)
 
 
 #: Failure categories of `classify_failure`, from the episode's trace.
@@ -183,8 +186,10 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
 
     A policy whose ``predict`` takes ``action_masks`` gets the env's masks at every step, as a
     MaskablePPO evaluation does, unless it was trained with ``masked=False``; the heuristics choose
-    among object cells by construction.
+    among object cells by construction. A policy with a ``stats`` dict of counters gets the
+    episode's increments recorded (``policy_stats``).
     """
+    stats_before = dict(getattr(policy, "stats", None) or {})
     obs, info = env.reset(seed=reset_seed)
     unsorted = info["num_unsorted_initial"]
     masked = takes_action_masks(policy)
@@ -204,8 +209,10 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
     success = bool(info["is_success"]) and actions < max_actions
     failure = classify_failure(success, bool(info["fell"]), bool(terminated), actions, noops, max_repeat,
                                "relabelled" in info)
+    stats = getattr(policy, "stats", None) or {}
     return {"success": success, "actions": actions, "num_unsorted_initial": int(unsorted), "fell": bool(info["fell"]),
-            "noops": noops, "failure": failure, "max_repeat": max_repeat}
+            "noops": noops, "failure": failure, "max_repeat": max_repeat,
+            "policy_stats": {key: int(value) - int(stats_before.get(key, 0)) for key, value in stats.items()}}
 
 
 #: Env options an evaluation may set (the rest of the env is fixed by the protocol and the policy).

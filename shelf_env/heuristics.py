@@ -206,7 +206,7 @@ class PickHeuristic(ObservationPolicy):
         """The best-scoring candidate cell; the front-most object when every visible one is sorted."""
         score = self.score(view)
         if not np.isfinite(score).any():
-            return _front_most(view.graspable)
+            return front_most(view.graspable)
         row, col = np.unravel_index(int(np.argmax(score)), score.shape)
         return int(row), int(col)
 
@@ -238,7 +238,7 @@ class AccessibilityHeuristic(PickHeuristic):
         return np.where(candidates, view.distance_to_region() + self.front_weight * rows, -np.inf)
 
 
-def _front_most(cells: np.ndarray) -> tuple[int, int]:
+def front_most(cells: np.ndarray) -> tuple[int, int]:
     """The front-most (largest row) of ``cells``, the middle one of that row's cells."""
     rows, cols = np.nonzero(cells)
     front = cols[rows == rows.max()]

@@ -10,13 +10,16 @@ the simulation the parent would (Bullet is deterministic given the same state). 
 candidate whose step leaves the scene valid (nothing fell, everything at rest); when every
 candidate would end the episode invalid, it takes the base heuristic's own choice.
 
-So with ``max_probes`` covering every candidate, an episode of the lookahead policy ends with a fall
-only where *every* pick of a visible unsorted object would have dropped something, or where every
-visible object looks sorted (the base heuristic's one uncovering pick, the front-most object, is
-then taken unprobed): its fall rate on the evaluation scenes bounds from above the rate of falls
-that no choice among these picks at that step avoids. It is a
-diagnostic and a privileged teacher, not a baseline of the paper: it reads the simulator, which a
-real robot cannot fork.
+When every visible object looks sorted, the base heuristic uncovers: it picks the front-most
+object. The lookahead then probes that pick first and every other visible object's front-most cell
+after it, front first, in the same way.
+
+So with ``max_probes`` covering every candidate, an episode of the lookahead policy ends invalid only
+at a step where *every* candidate pick would have: `stats` (per episode in the evaluation records,
+``policy_stats``) says whether that step was a sorting step (``unavoidable``) or an uncovering one
+(``uncover_unavoidable``). Its fall rate on the evaluation scenes bounds from above the rate of
+falls that no choice among these picks at that step avoids. It is a diagnostic and a privileged
+teacher, not a baseline of the paper: it reads the simulator, which a real robot cannot fork.
 
 Limits: POSIX only (``os.fork``), PyBullet in DIRECT mode only (a GUI or shared-memory server is not
 copied by a fork), one probe costs one env action, and the probe does not look past the step (a pick
@@ -25,18 +28,33 @@ that is safe now but leaves a trap is not seen).
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 import os
+import pathlib
+import sys
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import gymnasium as gym
 import numpy as np
 import pybullet as pb
 
+from sb3_pixeldqn.files import write_atomically
 from shelf_env import params
 from shelf_env.env import ShelfSortEnv
-from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, ObservationView, PickHeuristic
+from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, ObservationView, PickHeuristic, front_most
+
+if TYPE_CHECKING:  # shelf_env.evaluation imports this module to name the lookahead policies
+    from shelf_env.evaluation import EpisodeRecord
+
+#: `LookaheadHeuristic.stats`: steps decided among visible unsorted objects' picks (``decisions``)
+#: or, when every visible object looked sorted, among uncovering picks (``uncover_decisions``); of
+#: those, how many vetoed the base heuristic's choice (``vetoes``) and how many found every
+#: candidate invalid (``unavoidable``); and the probes (forked steps) spent on all of them.
+STAT_KEYS = ("decisions", "vetoes", "unavoidable", "uncover_decisions", "uncover_vetoes", "uncover_unavoidable",
+             "probes")
 
 
 @dataclass(frozen=True)
@@ -112,7 +130,7 @@ class LookaheadHeuristic(PickHeuristic):
         self.env = env
         self.base = base(env)
         self.max_probes = max_probes
-        self.stats = {"decisions": 0, "probes": 0, "vetoes": 0, "unavoidable": 0}
+        self.stats = dict.fromkeys(STAT_KEYS, 0)
 
     def score(self, view: ObservationView) -> np.ndarray:
         return self.base.score(view)
@@ -129,17 +147,26 @@ class LookaheadHeuristic(PickHeuristic):
         best.sort(key=lambda t: (-t[0], t[1] * score.shape[1] + t[2]))
         return [(row, col) for _, row, col in best]
 
+    def uncover_candidates(self, view: ObservationView) -> list[tuple[int, int]]:
+        """When every visible object looks sorted: the base's uncovering pick (the front-most object)
+        first, then every other visible object's front-most cell, front first."""
+        first = front_most(view.graspable)
+        others = [front_most(view.graspable & (view.blob == b)) for b in np.unique(view.blob[view.graspable])]
+        others.sort(key=lambda rc: (-rc[0], rc[1]))
+        return [first] + [rc for rc in others if view.blob[rc] != view.blob[first]]
+
     def choose(self, view: ObservationView) -> tuple[int, int]:
         cells = self.candidates(view)
-        if not cells:
-            return super().choose(view)
-        self.stats["decisions"] += 1
+        prefix = ""
+        if not cells:  # every visible object looks sorted: probe the uncovering picks instead
+            cells, prefix = self.uncover_candidates(view), "uncover_"
+        self.stats[prefix + "decisions"] += 1
         for i, (row, col) in enumerate(cells[:self.max_probes]):
             self.stats["probes"] += 1
             if probe_step(self.env, self._pick(row, col)).valid:
-                self.stats["vetoes"] += int(i > 0)
+                self.stats[prefix + "vetoes"] += int(i > 0)
                 return row, col
-        self.stats["unavoidable"] += 1
+        self.stats[prefix + "unavoidable"] += 1
         return cells[0]
 
 
@@ -155,3 +182,58 @@ class LookaheadDistance(LookaheadHeuristic):
 
     def __init__(self, env: gym.Env, max_probes: int | None = None) -> None:
         super().__init__(env, DistanceHeuristic, max_probes)
+
+
+# ---------------------------------------------------------------- what the lookahead's episodes met
+def invalid_step_table(records: list[EpisodeRecord]) -> str:
+    """Markdown: per lookahead policy and N, how its episodes that ended invalid (a fall or an
+    unstable scene) got there, from the records' ``policy_stats``: at a sorting step where every
+    visible unsorted object's pick was invalid, at an uncovering step where every visible object's
+    pick was, or at an unprobed step (none expected: the empty-view pick touches nothing); with the
+    vetoes (the base's choice was invalid, another was not) per episode."""
+    rows = ["| policy | N | episodes | ended invalid | every sorting pick invalid | every uncovering pick invalid "
+            "| unprobed | vetoes / episode | probes / action |", "|---|---|---|---|---|---|---|---|---|"]
+    groups: dict[tuple[str, int], list[EpisodeRecord]] = {}
+    for r in records:
+        if r.policy_stats:
+            groups.setdefault((r.policy, r.num_objects), []).append(r)
+    if not groups:
+        raise ValueError("no record carries lookahead stats (policy_stats): evaluate h-d-lookahead or "
+                         "h-a-lookahead with this version")
+    for (policy, n), rs in sorted(groups.items()):
+        invalid = [r for r in rs if r.failure in ("fell", "unstable")]
+        sorting = sum(r.policy_stats.get("unavoidable", 0) > 0 for r in invalid)
+        uncover = sum(r.policy_stats.get("uncover_unavoidable", 0) > 0 for r in invalid)
+        vetoes = sum(r.policy_stats.get("vetoes", 0) + r.policy_stats.get("uncover_vetoes", 0) for r in rs)
+        probes = sum(r.policy_stats.get("probes", 0) for r in rs)
+        rows.append(f"| {policy} | {n} | {len(rs)} | {len(invalid)} | {sorting} | {uncover} "
+                    f"| {len(invalid) - sorting - uncover} | {vetoes / len(rs):.2f} "
+                    f"| {probes / max(1, sum(r.actions for r in rs)):.2f} |")
+    return "\n".join(rows) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m shelf_env.lookahead",
+                                     description="How the lookahead's invalid episodes ended (writes "
+                                                 "<folder>/invalid_steps.md)")
+    parser.add_argument("folder", type=pathlib.Path, help="a shelf-evaluate --out folder with lookahead cells")
+    args = parser.parse_args(argv)
+    from shelf_env.evaluation import load_cell  # here: the evaluation imports this module
+
+    cells = sorted((args.folder / "cells").glob("*.json"))
+    try:
+        if not cells:
+            raise ValueError(f"{args.folder}/cells has no evaluation cells")
+        table = invalid_step_table([r for path in cells for r in load_cell(path)])
+    except ValueError as err:
+        print(f"lookahead: error: {err}", file=sys.stderr)
+        return 2
+    command = " ".join(["python -m shelf_env.lookahead", *(sys.argv[1:] if argv is None else argv)])
+    text = f"How the lookahead's episodes ended invalid (`{command}`):\n\n{table}"
+    write_atomically(args.folder / "invalid_steps.md", lambda tmp: tmp.write_text(text))
+    print(table, end="")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

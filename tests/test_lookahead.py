@@ -10,8 +10,17 @@ import numpy as np
 import pytest
 
 from shelf_env import evaluation as ev
-from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
-from shelf_env.lookahead import LookaheadAccessibility, LookaheadDistance, probe_step
+from shelf_env import lookahead
+from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, ObservationView
+from shelf_env.lookahead import (
+    STAT_KEYS,
+    LookaheadAccessibility,
+    LookaheadDistance,
+    LookaheadHeuristic,
+    Outcome,
+    invalid_step_table,
+    probe_step,
+)
 from shelf_env.world import Region
 from tests.conftest import REGIONS
 from tests.test_closed_loop import DRAG_SCENE
@@ -20,6 +29,12 @@ from tests.test_closed_loop import DRAG_SCENE
 # and its carry drags the front one out of the opening
 DRAG_REGIONS = [Region(0.0, 0.40, -0.30, -0.12), Region(0.0, 0.40, 0.12, 0.30), Region(0.0, 0.40, -0.09, 0.09)]
 SCENE = [(DRAG_SCENE[0][0], 0, 0.30, 0.05, 0.0), (DRAG_SCENE[1][0], 1, 0.06, 0.05, 0.0)]
+
+
+def stats(look: LookaheadHeuristic) -> dict[str, int]:
+    """The lookahead's non-zero counters."""
+    assert set(look.stats) == set(STAT_KEYS)
+    return {key: value for key, value in look.stats.items() if value}
 
 
 def sha(obs: np.ndarray) -> str:
@@ -51,7 +66,7 @@ def test_lookahead_vetoes_the_pick_that_drags_the_neighbour_out(env):
     action = int(look.predict(obs)[0])
     _, row, col = env.decode_action(action)
     assert abs(env.codec.cell_centre(row, col)[0] - 0.06) < 0.04  # the front box instead
-    assert look.stats == {"decisions": 1, "probes": 2, "vetoes": 1, "unavoidable": 0}
+    assert stats(look) == {"decisions": 1, "probes": 2, "vetoes": 1}
     _, reward, _, _, info = env.step(action)
     assert not info["fell"] and reward != -10 and len(env.world.objects) == 2
 
@@ -61,19 +76,63 @@ def test_lookahead_keeps_the_base_choice_when_it_is_valid_or_nothing_is(env):
     obs, _ = env.set_scene([(DRAG_SCENE[0][0], 0, 0.30, 0.0, 0.0), (DRAG_SCENE[1][0], 1, 0.06, 0.0, 0.0)], REGIONS)
     look = LookaheadAccessibility(env)
     assert int(look.predict(obs)[0]) == int(AccessibilityHeuristic(env).predict(obs)[0])
-    assert look.stats == {"decisions": 1, "probes": 1, "vetoes": 0, "unavoidable": 1}
+    assert stats(look) == {"decisions": 1, "probes": 1, "unavoidable": 1}
     obs, _ = env.reset(seed=5, options={"num_objects": 2})  # its first H-a pick is fine: one probe
     look = LookaheadAccessibility(env)
     action = int(look.predict(obs)[0])
     assert probe_step(env, action).valid
     assert action == int(AccessibilityHeuristic(env).predict(obs)[0])
-    assert look.stats == {"decisions": 1, "probes": 1, "vetoes": 0, "unavoidable": 0}
+    assert stats(look) == {"decisions": 1, "probes": 1}
 
 
-def test_lookahead_policies_are_named_policies_of_the_evaluation():
-    records = ev.evaluate_cell("h-a-lookahead", num_objects=2, seed=0, runs=1, object_set="train")
+def test_lookahead_probes_the_uncovering_picks_when_every_visible_object_looks_sorted(env, monkeypatch):
+    # both boxes sorted (class 1's region is the middle strip): H-a uncovers with the front box
+    obs, _ = env.set_scene([(DRAG_SCENE[0][0], 1, 0.30, 0.0, 0.0), (DRAG_SCENE[1][0], 1, 0.06, 0.0, 0.0)], REGIONS)
+    look = LookaheadAccessibility(env)
+    view = ObservationView.from_observation(obs, look.margin_cells)
+    assert look.candidates(view) == []
+    front, back = look.uncover_candidates(view)
+    assert front == look.base.choose(view)  # the base's own uncovering pick comes first
+    assert env.codec.cell_centre(*front)[0] < 0.1 < 0.25 < env.codec.cell_centre(*back)[0]
+    assert probe_step(env, look._pick(*front)).valid and probe_step(env, look._pick(*back)).fell  # the real outcomes
+    assert int(look.predict(obs)[0]) == look._pick(*front)
+    assert stats(look) == {"uncover_decisions": 1, "probes": 1}
+    # were the front pick the invalid one, the back box would be taken, and the veto counted
+    invalid = Outcome(-10.0, True, True, False, "")
+    monkeypatch.setattr(lookahead, "probe_step", lambda _env, action: invalid if action == look._pick(*front)
+                        else Outcome(0.0, False, False, False, ""))
+    look = LookaheadAccessibility(env)
+    assert int(look.predict(obs)[0]) == look._pick(*back)
+    assert stats(look) == {"uncover_decisions": 1, "uncover_vetoes": 1, "probes": 2}
+    monkeypatch.setattr(lookahead, "probe_step", lambda _env, action: invalid)  # nothing valid: the base's choice
+    look = LookaheadAccessibility(env)
+    assert int(look.predict(obs)[0]) == look._pick(*front)
+    assert stats(look) == {"uncover_decisions": 1, "uncover_unavoidable": 1, "probes": 2}
+
+
+def test_lookahead_policies_are_named_policies_of_the_evaluation_with_stats_per_episode():
+    records = ev.evaluate_cell("h-a-lookahead", num_objects=2, seed=0, runs=2, object_set="train")
     assert records[0].policy == "h-a-lookahead" and records[0].actions >= 1
     assert ev.check_policy("h-d-lookahead") == ("pick", "push")
+    for r in records:  # each episode's own counters, not the policy's running totals
+        assert set(r.policy_stats) == set(STAT_KEYS)
+        steps = r.policy_stats["decisions"] + r.policy_stats["uncover_decisions"]
+        assert 1 <= steps <= r.actions and r.policy_stats["probes"] >= steps
+    assert ev.evaluate_cell("h-a", num_objects=1, seed=0, runs=1, object_set="train")[0].policy_stats == {}
+
+
+def test_invalid_step_table_counts_how_the_invalid_episodes_ended():
+    def record(run, failure, **counts):
+        return ev.EpisodeRecord("h-d-lookahead", "ycb", 8, 0, run, failure == "", 4, 8, failure == "fell",
+                                failure=failure, policy_stats={**dict.fromkeys(STAT_KEYS, 0), **counts})
+    records = [record(0, "", decisions=4, vetoes=2, probes=8), record(1, "fell", decisions=4, unavoidable=1, probes=9),
+               record(2, "fell", uncover_decisions=4, uncover_unavoidable=1, uncover_vetoes=1, probes=7),
+               record(3, "unstable", decisions=4, unavoidable=1, probes=4), record(4, "timeout", decisions=4, probes=4),
+               ev.EpisodeRecord("h-d", "ycb", 8, 0, 0, False, 4, 8, True, failure="fell")]  # no stats: left out
+    table = invalid_step_table(records)
+    assert "| h-d-lookahead | 8 | 5 | 3 | 2 | 1 | 0 | 0.60 | 1.60 |" in table and "| h-d |" not in table
+    with pytest.raises(ValueError, match="lookahead stats"):
+        invalid_step_table(records[-1:])
 
 
 def test_bad_input():
