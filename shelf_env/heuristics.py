@@ -195,8 +195,11 @@ class PickHeuristic(ObservationPolicy):
             view.restrict_to_clear_carries(obs, self.pixel_size)
         if not view.graspable.any():  # nothing visible: pick the middle of the floor (a no-op probe)
             return self._pick(self.rows // 2, self.cols // 2)
-        row, col = self.choose(view)
-        return self._pick(row, col)
+        return self.act_on(view, obs)
+
+    def act_on(self, view: ObservationView, obs: np.ndarray) -> int:
+        """The action for an observation with something graspable: the pick of `choose`'s cell."""
+        return self._pick(*self.choose(view))
 
     def score(self, view: ObservationView) -> np.ndarray:
         """(H, W) preference of each candidate cell (graspable, of an unsorted object); -inf elsewhere."""

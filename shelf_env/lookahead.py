@@ -12,13 +12,16 @@ candidate would end the episode invalid, it takes the base heuristic's own choic
 
 When every visible object looks sorted, the base heuristic uncovers: it picks the front-most
 object. The lookahead then probes that pick first and every other visible object's front-most cell
-after it, front first, in the same way.
+after it, front first, in the same way. When every candidate pick is invalid, it probes pushes
+(`LookaheadHeuristic.push_candidates`: two per visible object, from either side at its middle row)
+and takes the first that leaves the scene valid *and* changes the observation (a push that moves
+nothing would only repeat the deadlock).
 
 So with ``max_probes`` covering every candidate, an episode of the lookahead policy ends invalid only
-at a step where *every* candidate pick would have: `stats` (per episode in the evaluation records,
-``policy_stats``) says whether that step was a sorting step (``unavoidable``) or an uncovering one
-(``uncover_unavoidable``). Its fall rate on the evaluation scenes bounds from above the rate of
-falls that no choice among these picks at that step avoids. It is a diagnostic and a privileged
+at a step where *every* candidate pick and push would have: `stats` (per episode in the evaluation
+records, ``policy_stats``) says whether that step was a sorting step (``unavoidable``) or an
+uncovering one (``uncover_unavoidable``). Its fall rate on the evaluation scenes bounds from above
+the rate of falls that no choice among these actions at that step avoids. It is a diagnostic and a privileged
 teacher, not a baseline of the paper: it reads the simulator, which a real robot cannot fork.
 
 Limits: POSIX only (``os.fork``), PyBullet in DIRECT mode only (a GUI or shared-memory server is not
@@ -51,10 +54,11 @@ if TYPE_CHECKING:  # shelf_env.evaluation imports this module to name the lookah
 
 #: `LookaheadHeuristic.stats`: steps decided among visible unsorted objects' picks (``decisions``)
 #: or, when every visible object looked sorted, among uncovering picks (``uncover_decisions``); of
-#: those, how many vetoed the base heuristic's choice (``vetoes``) and how many found every
-#: candidate invalid (``unavoidable``); and the probes (forked steps) spent on all of them.
+#: those, how many vetoed the base heuristic's choice (``vetoes``), how many found every candidate
+#: pick invalid but a push valid (``push_rescues``, either kind of step) and how many found every
+#: candidate pick and push invalid (``unavoidable``); and the probes (forked steps) spent on all.
 STAT_KEYS = ("decisions", "vetoes", "unavoidable", "uncover_decisions", "uncover_vetoes", "uncover_unavoidable",
-             "probes")
+             "push_rescues", "probes")
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,11 @@ class Outcome:
     def valid(self) -> bool:
         """Nothing fell and everything came to rest (the task's rules, `shelf_env.task`)."""
         return self.reward != params.REWARD_INVALID
+
+
+def digest(obs: np.ndarray) -> str:
+    """sha256 of an observation's bytes (`Outcome.obs_sha256`)."""
+    return hashlib.sha256(np.ascontiguousarray(obs).tobytes()).hexdigest()
 
 
 def probe_step(env: gym.Env, action: int) -> Outcome:
@@ -95,7 +104,7 @@ def probe_step(env: gym.Env, action: int) -> Outcome:
             obs, reward, terminated, _, info = base.step(int(action))
             payload = {"reward": float(reward), "terminated": bool(terminated), "fell": bool(info["fell"]),
                        "is_success": bool(info["is_success"]),
-                       "obs_sha256": hashlib.sha256(np.ascontiguousarray(obs).tobytes()).hexdigest()}
+                       "obs_sha256": digest(obs)}
         except BaseException as err:  # noqa: BLE001  (reported to the parent, which raises it)
             payload, status = {"error": f"{type(err).__name__}: {err}"}, 1
         data = json.dumps(payload).encode()
@@ -118,18 +127,18 @@ def probe_step(env: gym.Env, action: int) -> Outcome:
 
 class LookaheadHeuristic(PickHeuristic):
     """A pick heuristic (``base``: H-a or H-d) that vetoes picks the simulator says end the episode
-    invalid (see the module docstring). ``stats`` counts decisions, probes, vetoes (the base's choice
-    would have been invalid and another candidate was not) and unavoidable steps (every candidate
-    probed was invalid)."""
+    invalid (see the module docstring); with ``pushes`` (and the env's push primitive) a step where
+    every pick is invalid tries pushes before giving up. ``stats`` counts them (`STAT_KEYS`)."""
 
     def __init__(self, env: gym.Env, base: type[PickHeuristic] = AccessibilityHeuristic,
-                 max_probes: int | None = None) -> None:
+                 max_probes: int | None = None, pushes: bool = True) -> None:
         super().__init__(env)
         if max_probes is not None and max_probes < 1:
             raise ValueError(f"max_probes must be >= 1 or None (every candidate), got {max_probes}")
         self.env = env
         self.base = base(env)
         self.max_probes = max_probes
+        self.pushes = pushes
         self.stats = dict.fromkeys(STAT_KEYS, 0)
 
     def score(self, view: ObservationView) -> np.ndarray:
@@ -155,7 +164,30 @@ class LookaheadHeuristic(PickHeuristic):
         others.sort(key=lambda rc: (-rc[0], rc[1]))
         return [first] + [rc for rc in others if view.blob[rc] != view.blob[first]]
 
-    def choose(self, view: ObservationView) -> tuple[int, int]:
+    def push_candidates(self, view: ObservationView) -> list[int]:
+        """Pushes that could free a deadlock (every pick invalid): for each visible object, a push
+        from just beside it at its middle row, towards its class's region first, then away;
+        unsorted objects first, front first. Empty where the env has no push primitive."""
+        if not {"push_left", "push_right"} <= set(self.codec.map_names):
+            return []
+        gap = self.margin_cells + 1  # start the blade clear of the object's side
+        scored = []
+        for b in np.unique(view.blob[view.blob >= 0]):
+            rows, cols = np.nonzero(view.blob == b)
+            row = int(np.median(rows))
+            in_row = cols[rows == row]
+            rect = view.regions[int(view.object_class[rows[0], cols[0]])]
+            towards_left = rect is not None and (rect[2] + rect[3]) / 2 < cols.mean()
+            pushes = [("push_left", min(self.cols - 1, int(in_row.max()) + gap)),
+                      ("push_right", max(0, int(in_row.min()) - gap))]
+            if not towards_left:
+                pushes.reverse()
+            is_sorted = bool(view.sorted_cells[rows[0], cols[0]])
+            scored += [((is_sorted, -int(rows.max()), i), self.codec.encode(name, row, col))
+                       for i, (name, col) in enumerate(pushes)]
+        return [action for _, action in sorted(scored)]
+
+    def act_on(self, view: ObservationView, obs: np.ndarray) -> int:
         cells = self.candidates(view)
         prefix = ""
         if not cells:  # every visible object looks sorted: probe the uncovering picks instead
@@ -165,23 +197,31 @@ class LookaheadHeuristic(PickHeuristic):
             self.stats["probes"] += 1
             if probe_step(self.env, self._pick(row, col)).valid:
                 self.stats[prefix + "vetoes"] += int(i > 0)
-                return row, col
+                return self._pick(row, col)
+        if self.pushes:  # every pick probed is invalid: a push that keeps the scene valid and changes it
+            now = digest(obs)
+            for action in self.push_candidates(view)[:self.max_probes]:
+                self.stats["probes"] += 1
+                outcome = probe_step(self.env, action)
+                if outcome.valid and outcome.obs_sha256 != now:
+                    self.stats["push_rescues"] += 1
+                    return action
         self.stats[prefix + "unavoidable"] += 1
-        return cells[0]
+        return self._pick(*cells[0])
 
 
 class LookaheadAccessibility(LookaheadHeuristic):
     """H-a with the one-step lookahead (`LookaheadHeuristic`), policy name ``"h-a-lookahead"``."""
 
-    def __init__(self, env: gym.Env, max_probes: int | None = None) -> None:
-        super().__init__(env, AccessibilityHeuristic, max_probes)
+    def __init__(self, env: gym.Env, max_probes: int | None = None, pushes: bool = True) -> None:
+        super().__init__(env, AccessibilityHeuristic, max_probes, pushes)
 
 
 class LookaheadDistance(LookaheadHeuristic):
     """H-d with the one-step lookahead (`LookaheadHeuristic`), policy name ``"h-d-lookahead"``."""
 
-    def __init__(self, env: gym.Env, max_probes: int | None = None) -> None:
-        super().__init__(env, DistanceHeuristic, max_probes)
+    def __init__(self, env: gym.Env, max_probes: int | None = None, pushes: bool = True) -> None:
+        super().__init__(env, DistanceHeuristic, max_probes, pushes)
 
 
 # ---------------------------------------------------------------- what the lookahead's episodes met
@@ -189,10 +229,12 @@ def invalid_step_table(records: list[EpisodeRecord]) -> str:
     """Markdown: per lookahead policy and N, how its episodes that ended invalid (a fall or an
     unstable scene) got there, from the records' ``policy_stats``: at a sorting step where every
     visible unsorted object's pick was invalid, at an uncovering step where every visible object's
-    pick was, or at an unprobed step (none expected: the empty-view pick touches nothing); with the
-    vetoes (the base's choice was invalid, another was not) per episode."""
-    rows = ["| policy | N | episodes | ended invalid | every sorting pick invalid | every uncovering pick invalid "
-            "| unprobed | vetoes / episode | probes / action |", "|---|---|---|---|---|---|---|---|---|"]
+    pick was (and every probed push, both), or at an unprobed step (none expected: the empty-view
+    pick touches nothing); with the vetoes (the base's choice was invalid, another pick was not) and
+    push rescues (every pick invalid, a push not) per episode."""
+    rows = ["| policy | N | episodes | ended invalid | no valid pick or push at a sorting step "
+            "| ... at an uncovering step | unprobed | vetoes / episode | push rescues / episode | probes / action |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
     groups: dict[tuple[str, int], list[EpisodeRecord]] = {}
     for r in records:
         if r.policy_stats:
@@ -205,9 +247,10 @@ def invalid_step_table(records: list[EpisodeRecord]) -> str:
         sorting = sum(r.policy_stats.get("unavoidable", 0) > 0 for r in invalid)
         uncover = sum(r.policy_stats.get("uncover_unavoidable", 0) > 0 for r in invalid)
         vetoes = sum(r.policy_stats.get("vetoes", 0) + r.policy_stats.get("uncover_vetoes", 0) for r in rs)
+        rescues = sum(r.policy_stats.get("push_rescues", 0) for r in rs)
         probes = sum(r.policy_stats.get("probes", 0) for r in rs)
         rows.append(f"| {policy} | {n} | {len(rs)} | {len(invalid)} | {sorting} | {uncover} "
-                    f"| {len(invalid) - sorting - uncover} | {vetoes / len(rs):.2f} "
+                    f"| {len(invalid) - sorting - uncover} | {vetoes / len(rs):.2f} | {rescues / len(rs):.2f} "
                     f"| {probes / max(1, sum(r.actions for r in rs)):.2f} |")
     return "\n".join(rows) + "\n"
 

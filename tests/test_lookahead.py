@@ -29,6 +29,8 @@ from tests.test_closed_loop import DRAG_SCENE
 # and its carry drags the front one out of the opening
 DRAG_REGIONS = [Region(0.0, 0.40, -0.30, -0.12), Region(0.0, 0.40, 0.12, 0.30), Region(0.0, 0.40, -0.09, 0.09)]
 SCENE = [(DRAG_SCENE[0][0], 0, 0.30, 0.05, 0.0), (DRAG_SCENE[1][0], 1, 0.06, 0.05, 0.0)]
+# with REGIONS only the back box is misplaced, and its carry drops the sorted front one
+DEADLOCK = [(DRAG_SCENE[0][0], 0, 0.30, 0.0, 0.0), (DRAG_SCENE[1][0], 1, 0.06, 0.0, 0.0)]
 
 
 def stats(look: LookaheadHeuristic) -> dict[str, int]:
@@ -73,8 +75,8 @@ def test_lookahead_vetoes_the_pick_that_drags_the_neighbour_out(env):
 
 def test_lookahead_keeps_the_base_choice_when_it_is_valid_or_nothing_is(env):
     # only the back box is misplaced: its carry drops the front one, and there is no other pick
-    obs, _ = env.set_scene([(DRAG_SCENE[0][0], 0, 0.30, 0.0, 0.0), (DRAG_SCENE[1][0], 1, 0.06, 0.0, 0.0)], REGIONS)
-    look = LookaheadAccessibility(env)
+    obs, _ = env.set_scene(DEADLOCK, REGIONS)
+    look = LookaheadAccessibility(env, pushes=False)
     assert int(look.predict(obs)[0]) == int(AccessibilityHeuristic(env).predict(obs)[0])
     assert stats(look) == {"decisions": 1, "probes": 1, "unavoidable": 1}
     obs, _ = env.reset(seed=5, options={"num_objects": 2})  # its first H-a pick is fine: one probe
@@ -83,6 +85,29 @@ def test_lookahead_keeps_the_base_choice_when_it_is_valid_or_nothing_is(env):
     assert probe_step(env, action).valid
     assert action == int(AccessibilityHeuristic(env).predict(obs)[0])
     assert stats(look) == {"decisions": 1, "probes": 1}
+
+
+def test_lookahead_frees_the_deadlock_with_a_push_that_keeps_the_scene_valid(env):
+    obs, _ = env.set_scene(DEADLOCK, REGIONS)  # every pick drops something
+    look = LookaheadAccessibility(env)
+    view = ObservationView.from_observation(obs, look.margin_cells)
+    pushes = look.push_candidates(view)
+    assert len(pushes) == 4 and {env.codec.decode(a)[0] for a in pushes} == {"push_left", "push_right"}
+    action = int(look.predict(obs)[0])
+    assert action in pushes and stats(look)["push_rescues"] == 1
+    assert stats(look)["probes"] == 1 + pushes.index(action) + 1  # the one pick, then the pushes up to it
+    for earlier in pushes[:pushes.index(action)]:  # the pushes tried before it were invalid or moved nothing
+        outcome = probe_step(env, earlier)
+        assert not outcome.valid or outcome.obs_sha256 == sha(obs)
+    next_obs, reward, terminated, _, info = env.step(action)
+    assert not info["fell"] and reward != -10 and not terminated and sha(next_obs) != sha(obs)
+    assert LookaheadAccessibility(env, pushes=False).push_candidates(view) == pushes  # the option gates their use
+    pick_only = gym.make("ShelfSort-v0", num_objects=2, primitives=("pick",)).unwrapped
+    try:
+        pick_only.reset(seed=0)
+        assert LookaheadAccessibility(pick_only).push_candidates(view) == []  # S's layout has no push
+    finally:
+        pick_only.close()
 
 
 def test_lookahead_probes_the_uncovering_picks_when_every_visible_object_looks_sorted(env, monkeypatch):
@@ -107,7 +132,8 @@ def test_lookahead_probes_the_uncovering_picks_when_every_visible_object_looks_s
     monkeypatch.setattr(lookahead, "probe_step", lambda _env, action: invalid)  # nothing valid: the base's choice
     look = LookaheadAccessibility(env)
     assert int(look.predict(obs)[0]) == look._pick(*front)
-    assert stats(look) == {"uncover_decisions": 1, "uncover_unavoidable": 1, "probes": 2}
+    assert stats(look) == {"uncover_decisions": 1, "uncover_unavoidable": 1,
+                           "probes": 2 + len(look.push_candidates(view))}  # both picks, then every push
 
 
 def test_lookahead_policies_are_named_policies_of_the_evaluation_with_stats_per_episode():
@@ -127,10 +153,11 @@ def test_invalid_step_table_counts_how_the_invalid_episodes_ended():
                                 failure=failure, policy_stats={**dict.fromkeys(STAT_KEYS, 0), **counts})
     records = [record(0, "", decisions=4, vetoes=2, probes=8), record(1, "fell", decisions=4, unavoidable=1, probes=9),
                record(2, "fell", uncover_decisions=4, uncover_unavoidable=1, uncover_vetoes=1, probes=7),
-               record(3, "unstable", decisions=4, unavoidable=1, probes=4), record(4, "timeout", decisions=4, probes=4),
+               record(3, "unstable", decisions=4, unavoidable=1, probes=4),
+               record(4, "timeout", decisions=4, push_rescues=2, probes=4),
                ev.EpisodeRecord("h-d", "ycb", 8, 0, 0, False, 4, 8, True, failure="fell")]  # no stats: left out
     table = invalid_step_table(records)
-    assert "| h-d-lookahead | 8 | 5 | 3 | 2 | 1 | 0 | 0.60 | 1.60 |" in table and "| h-d |" not in table
+    assert "| h-d-lookahead | 8 | 5 | 3 | 2 | 1 | 0 | 0.60 | 0.40 | 1.60 |" in table and "| h-d |" not in table
     with pytest.raises(ValueError, match="lookahead stats"):
         invalid_step_table(records[-1:])
 
