@@ -335,6 +335,14 @@ def load_cell(path: pathlib.Path) -> list[EpisodeRecord]:
     return [EpisodeRecord(**r) for r in json.loads(path.read_text())]
 
 
+def load_cells(out: pathlib.Path) -> list[EpisodeRecord]:
+    """Every record of every cell in ``<out>/cells/``; `ValueError` if there is none."""
+    paths = sorted((out / "cells").glob("*.json"))
+    if not paths:
+        raise ValueError(f"{out}/cells has no evaluation cells")
+    return [r for path in paths for r in load_cell(path)]
+
+
 def fingerprint_path(out: pathlib.Path, policy: str) -> pathlib.Path:
     """Where ``<out>`` records which checkpoint file its cells of ``policy``'s label came from."""
     return out / "cells" / f"{policy_label(policy)}.sha256"

@@ -21,8 +21,9 @@ So with ``max_probes`` covering every candidate, an episode of the lookahead pol
 at a step where *every* candidate pick and push would have: `stats` (per episode in the evaluation
 records, ``policy_stats``) says whether that step was a sorting step (``unavoidable``) or an
 uncovering one (``uncover_unavoidable``). Its fall rate on the evaluation scenes bounds from above
-the rate of falls that no choice among these actions at that step avoids. It is a diagnostic and a privileged
-teacher, not a baseline of the paper: it reads the simulator, which a real robot cannot fork.
+the rate of falls that no choice among these actions at that step avoids. It is a diagnostic and a
+privileged teacher, not a baseline of the paper: it reads the simulator, which a real robot cannot
+fork.
 
 Limits: POSIX only (``os.fork``), PyBullet in DIRECT mode only (a GUI or shared-memory server is not
 copied by a fork), one probe costs one env action, and the probe does not look past the step (a pick
@@ -261,13 +262,10 @@ def main(argv: list[str] | None = None) -> int:
                                                  "<folder>/invalid_steps.md)")
     parser.add_argument("folder", type=pathlib.Path, help="a shelf-evaluate --out folder with lookahead cells")
     args = parser.parse_args(argv)
-    from shelf_env.evaluation import load_cell  # here: the evaluation imports this module
+    from shelf_env.evaluation import load_cells  # here: the evaluation imports this module
 
-    cells = sorted((args.folder / "cells").glob("*.json"))
     try:
-        if not cells:
-            raise ValueError(f"{args.folder}/cells has no evaluation cells")
-        table = invalid_step_table([r for path in cells for r in load_cell(path)])
+        table = invalid_step_table(load_cells(args.folder))
     except ValueError as err:
         print(f"lookahead: error: {err}", file=sys.stderr)
         return 2

@@ -173,18 +173,15 @@ def main(argv: list[str] | None = None) -> int:
         ev.check_ns(args.ns)
         ev.check_cell_owner(args.folder, args.policies)
         conditions = ev.folder_conditions(args.folder)  # replayed under the conditions they ran in
-        cells = sorted((args.folder / "cells").glob("*.json"))
-        if not cells:
-            raise ValueError(f"{args.folder}/cells has no evaluation cells")
+        evaluated = ev.load_cells(args.folder)
     except ValueError as err:
         print(f"traces: error: {err}", file=sys.stderr)
         return 2
     by_label = {ev.policy_label(p): p for p in args.policies}
     chosen: dict[tuple[str, int], list[ev.EpisodeRecord]] = {}
-    for path in cells:
-        for r in ev.load_cell(path):
-            if r.policy in by_label and r.num_objects in args.ns and r.failure == args.failure:
-                chosen.setdefault((r.policy, r.num_objects), []).append(r)
+    for r in evaluated:
+        if r.policy in by_label and r.num_objects in args.ns and r.failure == args.failure:
+            chosen.setdefault((r.policy, r.num_objects), []).append(r)
     traces, mismatches = [], 0
     for (label, n), records in sorted(chosen.items()):
         for r in records[: args.limit or None]:
