@@ -258,6 +258,14 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         self._resolve_masks()
 
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        """SB3's ``set_env``, also with another number of envs than the model had (SB3 refuses that):
+        the replay buffer stores each env's transitions one by one and nothing else in the model
+        depends on the number, so a run can move between one env and many (parallel envs on a
+        machine with many cores). Spaces are checked as SB3 checks them."""
+        env = self._wrap_env(env, self.verbose)
+        self.n_envs = env.num_envs
+        if isinstance(self.replay_buffer, HindsightRelabelReplayBuffer):
+            self.replay_buffer.n_source_envs = env.num_envs
         super().set_env(env, force_reset)
         self._resolve_masks()
 

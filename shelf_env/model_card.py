@@ -70,7 +70,8 @@ def model_card(run: pathlib.Path, zip_path: pathlib.Path, results: pathlib.Path 
     stages = stage_times(run, curriculum.get("history", []))
     greedy = curriculum.get("greedy_history", [])
     sessions = progress.get("sessions", [])
-    machines = sorted({f"{s['machine']}, {s['torch_threads']} torch threads, {s['device']}" for s in sessions})
+    machines = sorted({f"{s['machine']}, {s['torch_threads']} torch threads, {s['device']}"
+                       + (f", {s['n_envs']} env processes" if s.get("n_envs", 1) > 1 else "") for s in sessions})
     size_mb = zip_path.stat().st_size / 2**20 if zip_path.exists() else float("nan")
     out = [f"# `{zip_path.name}`: PixelDoubleDQN, {layout}", "",
            "```python",

@@ -105,6 +105,11 @@ class TrainConfig:
     actor: bool = False
     actor_max_lag: int = 8
     actor_sync_every: int = 20
+    # parallel envs: collect from n_envs env processes at once (SB3's SubprocVecEnv), for machines
+    # with many cores (the learner on a GPU through SB3's ``device``); each collection step of the
+    # n_envs envs is followed by n_envs * gradient_steps gradient steps, so the gradient steps per
+    # env step are the sequential loop's
+    n_envs: int = 1
     extra: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -143,6 +148,11 @@ class TrainConfig:
         if not isinstance(self.actor, bool) or self.actor_max_lag < 1 or self.actor_sync_every < 1:
             raise ValueError("TrainConfig needs actor true or false, actor_max_lag >= 1 and actor_sync_every >= 1, got "
                              f"{self.actor!r}, {self.actor_max_lag} and {self.actor_sync_every}")
+        if isinstance(self.n_envs, bool) or not isinstance(self.n_envs, int) or self.n_envs < 1:
+            raise ValueError(f"TrainConfig.n_envs must be an integer >= 1, got {self.n_envs!r}")
+        if self.actor and self.n_envs > 1:
+            raise ValueError("TrainConfig: actor=true steps one env in an actor process; it cannot be combined with "
+                             f"n_envs = {self.n_envs} (parallel envs already overlap acting with learning)")
         if self.tb_images_every < 0:
             raise ValueError(f"TrainConfig.tb_images_every must be >= 0, got {self.tb_images_every}")
 
@@ -206,6 +216,16 @@ def make_actor_env(config: TrainConfig, threads: int = 1) -> Any:
 
     return ActorVecEnv(functools.partial(make_env, config), max_lag=config.actor_max_lag,
                        sync_every=config.actor_sync_every, threads=threads)
+
+
+def make_parallel_env(config: TrainConfig, seed: int) -> VecEnv:
+    """``config.n_envs`` training envs of ``config``, each in its own process (SB3's `SubprocVecEnv`,
+    every env in a `Monitor`), env ``i`` seeded ``seed + i``."""
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    return make_vec_env(functools.partial(make_env, config), n_envs=config.n_envs, seed=seed,
+                        vec_env_cls=SubprocVecEnv)
 
 
 def env_codec(env: gym.Env | VecEnv) -> ActionCodec:

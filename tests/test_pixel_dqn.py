@@ -196,3 +196,25 @@ def test_pick_only_variant_s():
     model = make_model(n_maps=1)
     assert model.policy.maps == PICK_ONLY_MAPS
     assert model.action_space.n == 12 * 20
+
+
+def test_set_env_takes_another_number_of_envs_and_keeps_training():
+    # parallel envs (shelf-train --n-envs): a model made on one env moves to three and back; every
+    # env's step is stored, ε's stage clock counts env steps, and the replay ratio is what
+    # gradient_steps says
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    model = make_model(learning_starts=2, gradient_steps=3)
+    model.set_env(DummyVecEnv([lambda: FindTheSquareEnv(n_maps=3, good_map=2)] * 3))
+    assert model.n_envs == 3 and model.replay_buffer.n_source_envs == 3
+    model.learn(12)
+    assert model.num_timesteps == 12 and model.stage_timesteps == 12
+    assert model.replay_buffer.size() == 12  # no relabelled twins in this env
+    # 4 collection steps of the 3 envs, each past learning_starts, each followed by 3 gradient steps
+    assert model._n_updates == 4 * 3
+    model.set_env(FindTheSquareEnv(n_maps=3, good_map=2))
+    assert model.n_envs == 1
+    model.learn(2, reset_num_timesteps=False)
+    assert model.num_timesteps == 14 and model.replay_buffer.size() == 14
+    with pytest.raises(ValueError, match="Observation spaces do not match"):
+        model.set_env(FindTheSquareEnv(shape=(4, 10, 20), n_maps=3))

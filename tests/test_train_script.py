@@ -171,3 +171,34 @@ def test_actor_process_trains_checkpoints_and_resumes(tmp_path):
     # every consumed step is stored (and relabelled twins) but the one each session stops at (SB3
     # stops before storing it)
     assert model.replay_buffer.size() >= 11 - 3 and model.replay_buffer.demonstrations.n_stored >= 3
+
+
+def test_parallel_envs_keep_the_replay_ratio_and_a_run_moves_between_machines(tmp_path, capsys):
+    # --n-envs 2: two env processes, two gradient steps per collection step; resumed with --n-envs 1
+    # (a run moving from a many-core machine to two cores), recorded as an amendment, one again
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    common = ["--out", str(tmp_path), "--learning-starts", "2", "--buffer-size", "200", "--widths", "4", "8", "8",
+              "--checkpoint-minutes", "0", "--threads", "1", "--set", "demo_steps=3"]
+    assert train.main([*common, "--n-envs", "2", "--max-steps", "8"]) == 0
+    assert "collecting from 2 env processes; learner on cpu" in capsys.readouterr().out
+    progress = json.loads((tmp_path / "progress.json").read_text())
+    assert progress["timesteps"] == 8 and progress["config"]["n_envs"] == 2
+    assert progress["sessions"][0]["n_envs"] == 2 and progress["sessions"][0]["device"] == "cpu"
+    model = PixelDoubleDQN.load(tmp_path / "model.zip")
+    # 4 collection steps of 2 envs (timesteps 2, 4, 6, 8): those at 4 and 6 are past learning_starts
+    # and followed by 2 gradient steps each; the run stops at its budget of 8 before training again
+    assert model.gradient_steps == 2 and model._n_updates == 2 * 2
+    with open(tmp_path / "episodes.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == progress["episodes"] and all(int(r["timestep"]) <= 8 for r in rows)
+
+    assert train.main([*common, "--n-envs", "1", "--max-steps", "10"]) == 0
+    progress = json.loads((tmp_path / "progress.json").read_text())
+    assert progress["timesteps"] == 10 and progress["config"]["n_envs"] == 1
+    assert progress["amendments"] == [{"timesteps": 8, "changes": {"n_envs": 1}}]
+    assert [s["n_envs"] for s in progress["sessions"]] == [2, 1]
+    model = PixelDoubleDQN.load(tmp_path / "model.zip")
+    assert model.gradient_steps == 1 and model._n_updates == 2 * 2 + 1  # step 9 trains once, 10 stops
+    assert train.main([*common, "--n-envs", "0", "--max-steps", "12"]) == 2  # a clear error, nothing run
+    assert "n_envs must be an integer >= 1" in capsys.readouterr().err

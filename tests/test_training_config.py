@@ -36,6 +36,18 @@ def test_recipe_model_has_every_lever_and_config_round_trips():
     env.close()
 
 
+@pytest.mark.parametrize("bad", [0, -2, 1.5, True, "4"])
+def test_n_envs_must_be_a_positive_integer(bad):
+    with pytest.raises(ValueError, match="n_envs must be an integer >= 1"):
+        PRESETS["p_s"].replace(n_envs=bad)
+
+
+def test_parallel_envs_and_the_actor_process_exclude_each_other():
+    with pytest.raises(ValueError, match="cannot be combined with n_envs = 4"):
+        PRESETS["p_s"].replace(actor=True, n_envs=4)
+    assert PRESETS["p_s"].replace(actor=True, n_envs=1).actor  # one env in an actor process is fine
+
+
 def test_heuristic_demonstrations_fill_the_kept_store_and_a_wrong_layout_is_refused():
     config = PRESETS["recipe"].replace(buffer_size=50, widths=(4, 8, 8), start_objects=1)
     env = make_env(config)

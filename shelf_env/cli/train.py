@@ -64,6 +64,7 @@ from shelf_env.training import (
     make_callbacks,
     make_env,
     make_model,
+    make_parallel_env,
 )
 
 #: TrainConfig fields ``--amend`` may change in a resumed run: what the curriculum callback reads
@@ -71,7 +72,7 @@ from shelf_env.training import (
 #: saved model or its replay buffer depends on.
 AMENDABLE = ("max_stage_timesteps", "min_stage_timesteps", "max_objects", "eval_every", "eval_episodes",
              "eval_max_actions", "eval_actions_per_object", "tb_images_every", "actor", "actor_max_lag",
-             "actor_sync_every")
+             "actor_sync_every", "n_envs")
 EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
 
 
@@ -117,6 +118,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--actor", action="store_true",
                    help="act in a separate process while the learner trains (same as --set actor=true): the actor "
                         "takes 1 torch thread, the learner --threads minus 1")
+    p.add_argument("--n-envs", type=int, default=None, metavar="K",
+                   help="collect from K env processes at once (--set n_envs=K; amendable), K gradient steps per "
+                        "collection step: for machines with many cores")
+    p.add_argument("--device", default="auto", help="torch device of the learner, as SB3's (auto: cuda if available)")
     p.add_argument("--init-from", type=pathlib.Path, default=None, metavar="ZIP",
                    help="a new run starts from this checkpoint's weights (same layout and network; its buffer "
                         "is not used); a resumed run continues from its own checkpoint")
@@ -143,6 +148,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         changes["masked_exploration"] = False
     if args.actor:
         changes["actor"] = True
+    if args.n_envs is not None:
+        changes["n_envs"] = args.n_envs
     changes.update(dict(args.overrides))
     return PRESETS[args.preset].replace(**changes)
 
@@ -220,7 +227,7 @@ class BudgetAndCheckpoint(BaseCallback):
 
 
 def session_record(model: PixelDoubleDQN, progress: dict, threads: int, buffer_kept: bool,
-                   actor: bool = False) -> dict[str, Any]:
+                   actor: bool = False, n_envs: int = 1) -> dict[str, Any]:
     """Where and when one run of the command started (for the model card's hardware and history)."""
     import datetime
     import os
@@ -230,8 +237,16 @@ def session_record(model: PixelDoubleDQN, progress: dict, threads: int, buffer_k
         "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "timesteps": int(model.num_timesteps), "wall_seconds": float(progress["wall_seconds"]),
         "machine": f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPUs", "torch_threads": int(threads),
-        "device": str(model.device), "buffer_kept": bool(buffer_kept), "actor": bool(actor),
+        "device": device_name(model.device), "buffer_kept": bool(buffer_kept), "actor": bool(actor),
+        "n_envs": int(n_envs),
     }
+
+
+def device_name(device: th.device) -> str:
+    """``cpu``, or ``cuda (NVIDIA H100 80GB HBM3)``: which accelerator a session's learner ran on."""
+    if device.type == "cuda":
+        return f"cuda ({th.cuda.get_device_name(device)})"
+    return str(device)
 
 
 MIRRORED = ("model.zip", "episodes.csv", "progress.json")  # progress last: it vouches for the others
@@ -291,6 +306,8 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError("--hours and --max-steps must be > 0, --checkpoint-minutes >= 0, --threads >= 1")
         mirrored = args.mirror is not None and (args.mirror / "model.zip").exists()
         resuming = (args.out / "model.zip").exists() or mirrored
+        if resuming and args.n_envs is not None:  # a run moving to another machine: recorded as an amendment
+            args.amendments.append(("n_envs", args.n_envs))
         if not resuming:  # a fresh run: its configuration is checked before anything is written
             config = config_from_args(args)  # TrainConfig checks its fields and values
             if args.amendments:
@@ -332,7 +349,8 @@ def train(args: argparse.Namespace) -> None:
                     "args": {k: str(v) for k, v in vars(args).items()}, "config": config.to_dict()}
     env = make_env(config)
     if resume:
-        model = PixelDoubleDQN.load(args.out / "model.zip", env=env, tensorboard_log=str(args.out / "tb"))
+        model = PixelDoubleDQN.load(args.out / "model.zip", env=env, tensorboard_log=str(args.out / "tb"),
+                                    device=args.device)
         # under the possibly amended cap
         if curriculum_over(model.curriculum_state or {}, model.num_timesteps, config.max_objects,
                            config.max_stage_timesteps):
@@ -348,7 +366,7 @@ def train(args: argparse.Namespace) -> None:
                   f"buffer (demonstrations are collected again; learning resumes after step {model.learning_starts})",
                   flush=True)
     else:
-        model = make_model(config, env, seed=args.seed, tensorboard_log=str(args.out / "tb"))
+        model = make_model(config, env, seed=args.seed, tensorboard_log=str(args.out / "tb"), device=args.device)
         if args.init_from is not None:
             init_from_checkpoint(model, args.init_from)
             digest = hashlib.sha256(args.init_from.read_bytes()).hexdigest()
@@ -356,7 +374,8 @@ def train(args: argparse.Namespace) -> None:
             print(f"starting from the weights of {args.init_from}", flush=True)
     progress.setdefault("sessions", []).append(session_record(model, progress, args.threads,
                                                               buffer_kept=(args.out / "replay.pkl").exists(),
-                                                              actor=config.actor))
+                                                              actor=config.actor, n_envs=config.n_envs))
+    session = len(progress["sessions"]) - 1
     demos = demo_policy(config, env)
     buffer = model.replay_buffer
     assert isinstance(buffer, HindsightRelabelReplayBuffer)
@@ -375,6 +394,13 @@ def train(args: argparse.Namespace) -> None:
         model.set_env(make_actor_env(config))
         env.close()
         print(f"acting in an actor process (1 torch thread); the learner has {th.get_num_threads()}", flush=True)
+    elif config.n_envs > 1:  # from here on the env steps come from n_envs env processes
+        # each session's envs get their own seeds (env i of session k: seed + 1000 k + i)
+        model.set_env(make_parallel_env(config, seed=args.seed + 1000 * session))
+        env.close()
+        print(f"collecting from {config.n_envs} env processes; learner on {model.device}", flush=True)
+    # the replay ratio of the config whatever the number of envs (a checkpoint keeps the last session's)
+    model.gradient_steps = config.gradient_steps * config.n_envs
     callbacks = [*make_callbacks(config, seed=args.seed), budget]
     try:
         model.learn(10**9, callback=CallbackList(callbacks), log_interval=5, reset_num_timesteps=not resume)
