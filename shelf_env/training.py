@@ -37,10 +37,15 @@ from sb3_pixeldqn.callbacks import GATES
 from shelf_env import params
 from shelf_env.actions import PRIMITIVES, ActionCodec
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
+from shelf_env.lookahead import LookaheadAccessibility, LookaheadDistance
 from shelf_env.objects import OBJECT_SETS
 from shelf_env.symmetry import MirrorWidth, PermuteClasses
 
-DEMO_POLICIES = {"h-a": AccessibilityHeuristic, "h-d": DistanceHeuristic}
+DEMO_POLICIES = {"h-a": AccessibilityHeuristic, "h-d": DistanceHeuristic,
+                 "h-a-lookahead": LookaheadAccessibility, "h-d-lookahead": LookaheadDistance}
+#: Demonstrators that read the simulator of the env they act in (`shelf_env.lookahead`: privileged
+#: teachers, which a real robot could not run): built on the training env itself, never on a probe.
+SIMULATOR_DEMOS = ("h-a-lookahead", "h-d-lookahead")
 AUGMENTATIONS = ("mirror", "permute")
 
 
@@ -56,7 +61,8 @@ class TrainConfig:
     # lever 1: one action mask everywhere (False: the paper's all-pixel argmax)
     masked: bool = True
     masked_exploration: bool = True
-    # lever 2: demonstrations
+    # lever 2: demonstrations (a key of DEMO_POLICIES; the lookahead ones are privileged teachers that
+    # probe the training env's simulator before each action)
     demo_policy: str | None = "h-a"
     demo_steps: int = 400
     demo_objects: tuple[int, ...] = (3,)  # N of the demonstration episodes, steps split evenly
@@ -291,7 +297,9 @@ def make_model(config: TrainConfig, env: gym.Env | VecEnv, seed: int = 0, tensor
 
 
 def demo_policy(config: TrainConfig, env: gym.Env) -> Any:
-    """The demonstration policy of ``config`` acting on ``env``'s layout (None if it has none)."""
+    """The demonstration policy of ``config`` acting on ``env``'s layout (None if it has none). The
+    ``SIMULATOR_DEMOS`` probe ``env`` itself before each action: ``env`` must be the env the
+    demonstrations are played in."""
     if config.demo_policy is None:
         return None
     return DEMO_POLICIES[config.demo_policy](env)  # TrainConfig.check allows only known names

@@ -30,6 +30,7 @@ from sb3_pixeldqn import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, HindsightRelabelRep
 from shelf_env.actions import ActionCodec
 from shelf_env.training import (
     PRESETS,
+    SIMULATOR_DEMOS,
     TrainConfig,
     augmentations,
     collect_demonstrations,
@@ -148,13 +149,24 @@ class RecipeCallback(BaseCallback):
         if config.actor:
             raise ValueError("actor: true in the yml, but rl-zoo3 builds and steps its own envs; train with "
                              "`shelf-train --actor` for an actor process, or set actor: false")
+        if config.n_envs > 1:
+            raise ValueError(f"n_envs: {config.n_envs} in the recipe callback's fields, but rl-zoo3 builds its own "
+                             "envs: set the yml's own n_envs instead")
         model.augment = augmentations(config, env_codec(self.training_env))
         buffer = model.replay_buffer
         assert isinstance(buffer, HindsightRelabelReplayBuffer)
         if config.demo_policy is not None and buffer.demonstrations is None and config.demo_steps > 0:
-            probe = make_env(config)  # the heuristics read only the layout of the env they are built on
-            demos = demo_policy(config, probe)
-            probe.close()
+            if config.demo_policy in SIMULATOR_DEMOS:  # it probes the env it acts in: the training env itself
+                envs = getattr(self.training_env, "envs", None)
+                if envs is None or len(envs) != 1:
+                    raise ValueError(f"demo_policy {config.demo_policy} probes the simulator of the env it plays "
+                                     f"in; rl-zoo3 gave {type(self.training_env).__name__} with "
+                                     f"{self.training_env.num_envs} env(s): use n_envs: 1 (a DummyVecEnv)")
+                demos = demo_policy(config, envs[0])
+            else:
+                probe = make_env(config)  # these heuristics read only the layout of the env they are built on
+                demos = demo_policy(config, probe)
+                probe.close()
             collect_demonstrations(model, config, demos, lambda n: self.training_env.env_method("set_num_objects", n),
                                    log=lambda line: print(line, flush=True) if self.verbose else None)
         self.children = CallbackList(make_callbacks(config, seed=model.seed or 0, verbose=self.verbose))

@@ -48,6 +48,25 @@ def test_parallel_envs_and_the_actor_process_exclude_each_other():
     assert PRESETS["p_s"].replace(actor=True, n_envs=1).actor  # one env in an actor process is fine
 
 
+def test_lookahead_teacher_probes_the_training_env_it_demonstrates_in():
+    # demo_policy="h-d-lookahead": H-d that probes each pick in the very env the demonstrations are
+    # played in (a privileged teacher); its probes leave that env's episode as it was
+    from shelf_env.lookahead import LookaheadDistance
+
+    config = PRESETS["recipe"].replace(buffer_size=50, widths=(4, 8, 8), start_objects=2,
+                                       demo_policy="h-d-lookahead")
+    env = make_env(config)
+    model = make_model(config, env)
+    teacher = demo_policy(config, env)
+    assert isinstance(teacher, LookaheadDistance) and teacher.env is env
+    stats = model.collect_demonstrations(teacher, 6)
+    assert stats["steps"] == 6 and stats["successes"] >= 1
+    assert teacher.stats["probes"] >= teacher.stats["decisions"] >= 1
+    demos = model.replay_buffer.demonstrations
+    assert demos is not None and demos.n_stored >= 6
+    env.close()
+
+
 def test_heuristic_demonstrations_fill_the_kept_store_and_a_wrong_layout_is_refused():
     config = PRESETS["recipe"].replace(buffer_size=50, widths=(4, 8, 8), start_objects=1)
     env = make_env(config)

@@ -71,3 +71,16 @@ def test_recipe_callback_refuses_fields_no_run_could_use():
     actor.init_callback(model)
     with pytest.raises(ValueError, match="shelf-train --actor"):
         actor.on_training_start({}, {})
+    # parallel envs are rl-zoo3's own n_envs; the lookahead teacher needs the one training env itself
+    parallel = RecipeCallback(verbose=0, n_envs=4)
+    parallel.init_callback(model)
+    with pytest.raises(ValueError, match="set the yml's own n_envs"):
+        parallel.on_training_start({}, {})
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    two = PixelDoubleDQN("FCNPolicy", DummyVecEnv([lambda: make_env(PRESETS["recipe"])] * 2),
+                         policy_kwargs=dict(widths=(4, 8, 8)))
+    teacher = RecipeCallback(verbose=0, demo_policy="h-d-lookahead")
+    teacher.init_callback(two)
+    with pytest.raises(ValueError, match="probes the simulator of the env it plays in.*2 env"):
+        teacher.on_training_start({}, {})
