@@ -25,7 +25,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
-from shelf_env.training import PRESETS, demo_policy, make_env, make_model, make_parallel_env
+from shelf_env.training import PRESETS, demo_policy, make_env, make_model, use_parallel_envs
 
 
 class StopAfter(BaseCallback):
@@ -52,10 +52,7 @@ def measure(n: int, n_envs: int, seconds: float, device: str, seed: int = 0) -> 
     demos = demo_policy(config, env)
     if demos is not None:  # demonstrations in the batches, as in training (not timed)
         model.collect_demonstrations(demos, 40)
-    if n_envs > 1:
-        model.set_env(make_parallel_env(config, seed=seed))
-        env.close()
-    model.gradient_steps = config.gradient_steps * n_envs
+    use_parallel_envs(model, config, seed=seed)  # what shelf-train --n-envs does
     try:
         model.learn(config.learning_starts + n_envs)  # the warm-up; only learning steps are timed
         steps, updates = model.num_timesteps, model._n_updates

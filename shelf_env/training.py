@@ -234,6 +234,18 @@ def make_parallel_env(config: TrainConfig, seed: int) -> VecEnv:
                         vec_env_cls=SubprocVecEnv)
 
 
+def use_parallel_envs(model: Any, config: TrainConfig, seed: int) -> None:
+    """From now on ``model`` collects from ``config.n_envs`` env processes (`make_parallel_env`, envs
+    seeded from ``seed``; its current env is closed) when that is more than one, and trains
+    ``n_envs * gradient_steps`` gradient steps per collection step: the config's gradient steps per
+    env step whatever the number of envs (a loaded checkpoint keeps the last session's number)."""
+    if config.n_envs > 1:
+        previous = model.get_env()
+        model.set_env(make_parallel_env(config, seed=seed))
+        previous.close()
+    model.gradient_steps = config.gradient_steps * config.n_envs
+
+
 def env_codec(env: gym.Env | VecEnv) -> ActionCodec:
     """The action codec of a ShelfSort-v0 env or of the first env of a VecEnv of them."""
     return env.get_attr("codec")[0] if isinstance(env, VecEnv) else ActionCodec.of(env)

@@ -64,7 +64,7 @@ from shelf_env.training import (
     make_callbacks,
     make_env,
     make_model,
-    make_parallel_env,
+    use_parallel_envs,
 )
 
 #: TrainConfig fields ``--amend`` may change in a resumed run: what the curriculum callback reads
@@ -394,13 +394,11 @@ def train(args: argparse.Namespace) -> None:
         model.set_env(make_actor_env(config))
         env.close()
         print(f"acting in an actor process (1 torch thread); the learner has {th.get_num_threads()}", flush=True)
-    elif config.n_envs > 1:  # from here on the env steps come from n_envs env processes
-        # each session's envs get their own seeds (env i of session k: seed + 1000 k + i)
-        model.set_env(make_parallel_env(config, seed=args.seed + 1000 * session))
-        env.close()
+    # with n_envs > 1 the env steps come from n_envs env processes from here on; each session's
+    # envs get their own seeds (env i of session k: seed + 1000 k + i)
+    use_parallel_envs(model, config, seed=args.seed + 1000 * session)
+    if config.n_envs > 1:
         print(f"collecting from {config.n_envs} env processes; learner on {model.device}", flush=True)
-    # the replay ratio of the config whatever the number of envs (a checkpoint keeps the last session's)
-    model.gradient_steps = config.gradient_steps * config.n_envs
     callbacks = [*make_callbacks(config, seed=args.seed), budget]
     try:
         model.learn(10**9, callback=CallbackList(callbacks), log_interval=5, reset_num_timesteps=not resume)
