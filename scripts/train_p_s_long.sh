@@ -11,10 +11,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
-if [ ! -f results/training/p_s_long/progress.json ]; then
-  mkdir -p results/training/p_s_long
-  cp -r results/training/p_s/tb results/training/p_s/model.zip results/training/p_s/episodes.csv results/training/p_s_long/
-  cp results/training/p_s/progress.json results/training/p_s_long/   # last: it vouches for the others
+if [ ! -f results/training/p_s_long/progress.json ]; then  # shelf-train's own mirror copy, atomic, progress last
+  python -c "import pathlib; from shelf_env.cli.train import copy_checkpoint; \
+copy_checkpoint(pathlib.Path('results/training/p_s'), pathlib.Path('results/training/p_s_long'))"
 fi
 shelf-train --out runs/p_s_long --mirror results/training/p_s_long --preset p_s --seed 0 \
     --hours 12 --threads 2 --checkpoint-minutes 10 \

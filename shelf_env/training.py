@@ -37,7 +37,7 @@ from sb3_pixeldqn.callbacks import GATES
 from shelf_env import params
 from shelf_env.actions import PRIMITIVES, ActionCodec
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
-from shelf_env.lookahead import LookaheadAccessibility, LookaheadDistance
+from shelf_env.lookahead import LookaheadAccessibility, LookaheadDistance, LookaheadHeuristic
 from shelf_env.objects import OBJECT_SETS
 from shelf_env.symmetry import MirrorWidth, PermuteClasses
 
@@ -45,7 +45,7 @@ DEMO_POLICIES = {"h-a": AccessibilityHeuristic, "h-d": DistanceHeuristic,
                  "h-a-lookahead": LookaheadAccessibility, "h-d-lookahead": LookaheadDistance}
 #: Demonstrators that read the simulator of the env they act in (`shelf_env.lookahead`: privileged
 #: teachers, which a real robot could not run): built on the training env itself, never on a probe.
-SIMULATOR_DEMOS = ("h-a-lookahead", "h-d-lookahead")
+SIMULATOR_DEMOS = tuple(name for name, cls in DEMO_POLICIES.items() if issubclass(cls, LookaheadHeuristic))
 AUGMENTATIONS = ("mirror", "permute")
 
 
