@@ -20,7 +20,10 @@ Beyond SB3's `ReplayBuffer` it keeps, per transition, what the pixel-wise learne
   ``noop="keep"`` stores them as they are; ``"penalty"`` subtracts ``noop_penalty`` from their
   reward; ``"terminal"`` also marks them terminal, so their target is the reward alone.
 - **Demonstrations**: `add_demonstration` writes into a second buffer that the ring never
-  overwrites; `sample_arrays` draws a given share of each batch from it and flags those rows.
+  overwrites; `sample_arrays` draws a given share of each batch from it and flags those rows for
+  the margin loss. A kept transition stored with ``expert=False`` (e.g. a teacher's counterfactual:
+  an action it tried in a copy of the env and rejected) is drawn the same way but not flagged: it
+  is trained with the TD loss only, as the margin loss would push its action up.
 
 Storage is flat — one transition per slot whatever the number of envs — because a relabelled
 transition belongs to one sub-env only. Pickling (``save_replay_buffer``) writes only the filled
@@ -40,7 +43,7 @@ from stable_baselines3.common.buffers import ReplayBuffer
 RELABEL_KEY = "relabelled"
 RELABEL_MODES = ("changed", "all", "off")
 NOOP_MODES = ("keep", "penalty", "terminal")
-_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts", "next_masks")
+_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts", "next_masks", "expert")
 
 
 def unchanged(obs: np.ndarray, next_obs: np.ndarray) -> bool:
@@ -110,6 +113,10 @@ class HindsightRelabelReplayBuffer(ReplayBuffer):
         self.noop = noop
         self.noop_penalty = float(noop_penalty)
         self.next_masks = np.zeros((self.buffer_size, (self.n_actions + 7) // 8), dtype=np.uint8)
+        #: Per slot: the margin loss applies when the transition is drawn as a demonstration
+        #: (meaningful in the demonstration store; `add_demonstration` sets it).
+        self.expert = np.zeros(self.buffer_size, dtype=bool)
+        self._expert = True
         self.n_relabelled = 0
         self.n_noop = 0
         #: Demonstration transitions, never overwritten by the ring (None until the first one).
@@ -156,6 +163,7 @@ class HindsightRelabelReplayBuffer(ReplayBuffer):
     def _add_one(self, obs: np.ndarray, next_obs: np.ndarray, action: Any, reward: float, done: float,
                  info: dict[str, Any], packed_mask: np.ndarray | None) -> None:
         self.next_masks[self.pos] = 255 if packed_mask is None else packed_mask
+        self.expert[self.pos] = self._expert
         super().add(obs[None], next_obs[None], np.asarray(action).reshape(1, -1), np.array([reward]),
                     np.array([done]), [info])
 
@@ -189,15 +197,23 @@ class HindsightRelabelReplayBuffer(ReplayBuffer):
 
     def add_demonstration(self, obs: np.ndarray, next_obs: np.ndarray, action: np.ndarray, reward: np.ndarray,
                           done: np.ndarray, infos: list[dict[str, Any]],
-                          next_action_masks: np.ndarray | None = None, capacity: int = 10_000) -> None:
-        """Like `add`, into the demonstration store (created with ``capacity`` slots on first use)."""
+                          next_action_masks: np.ndarray | None = None, capacity: int = 10_000,
+                          expert: bool = True) -> None:
+        """Like `add`, into the demonstration store (created with ``capacity`` slots on first use).
+        ``expert=False``: kept and drawn like the others, but not trained with the margin loss (an
+        action the demonstrator did not choose, e.g. one it saw fail)."""
         if self.demonstrations is None:
             self.demonstrations = HindsightRelabelReplayBuffer(
                 capacity, self.observation_space, self.action_space, self.device,
                 handle_timeout_termination=self.handle_timeout_termination,
                 relabel=self.relabel, noop=self.noop, noop_penalty=self.noop_penalty,
             )
-        self.demonstrations.add(obs, next_obs, action, reward, done, infos, next_action_masks)
+        demos = self.demonstrations
+        demos._expert = bool(expert)
+        try:
+            demos.add(obs, next_obs, action, reward, done, infos, next_action_masks)
+        finally:
+            demos._expert = True
 
     @property
     def n_stored(self) -> int:
@@ -216,22 +232,24 @@ class HindsightRelabelReplayBuffer(ReplayBuffer):
         if demos is not None and demos.n_stored > 0:
             n_demo = batch_size if self.n_stored == 0 else int(round(demo_fraction * batch_size))
         own = self._arrays(rng.integers(0, self.n_stored, size=batch_size - n_demo)) if n_demo < batch_size else None
+        if own is not None:  # the ring's rows are never demonstrations
+            own = own._replace(is_demo=np.zeros(len(own.is_demo), dtype=bool))
         if n_demo == 0:
             assert own is not None
             return own
         demo = demos._arrays(rng.integers(0, demos.n_stored, size=n_demo))  # type: ignore[union-attr]
-        demo = demo._replace(is_demo=np.ones(n_demo, dtype=bool))
         if own is None:
             return demo
         return TransitionBatch(*(np.concatenate([a, b]) for a, b in zip(own, demo)))
 
     def _arrays(self, inds: np.ndarray) -> TransitionBatch:
+        """The transitions at ``inds``; ``is_demo`` holds their expert flags (`sample_arrays` keeps
+        them for rows of the demonstration store and clears them for the ring's)."""
         masks = np.unpackbits(self.next_masks[inds], axis=1, count=self.n_actions).astype(bool)
         dones = self.dones[inds, 0] * (1 - self.timeouts[inds, 0])
         return TransitionBatch(
             self.observations[inds, 0], self.actions[inds, 0, 0].astype(np.int64), self.next_observations[inds, 0],
-            self.rewards[inds, 0].astype(np.float32), dones.astype(np.float32), masks,
-            np.zeros(len(inds), dtype=bool),
+            self.rewards[inds, 0].astype(np.float32), dones.astype(np.float32), masks, self.expert[inds].copy(),
         )
 
     # ------------------------------------------------------------------ pickling
@@ -246,8 +264,10 @@ class HindsightRelabelReplayBuffer(ReplayBuffer):
             n_actions = int(state["action_space"].n)
             state["next_masks"] = np.full((len(state["observations"]), (n_actions + 7) // 8), 255, dtype=np.uint8)
             state.setdefault("n_actions", n_actions)
+        if "expert" not in state:  # pickled before counterfactuals: every kept transition was the demonstrator's
+            state["expert"] = np.ones(len(state["observations"]), dtype=bool)
         for key, default in (("relabel", "all"), ("noop", "keep"), ("noop_penalty", 1.0),
-                             ("n_noop", 0), ("demonstrations", None)):
+                             ("n_noop", 0), ("demonstrations", None), ("_expert", True)):
             state.setdefault(key, default)
         for name in _ARRAYS:
             stored = state[name]

@@ -556,12 +556,22 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         self._last_original_obs = new_obs
 
     def collect_demonstrations(self, demo_policy: Any, n_steps: int, capacity: int | None = None,
-                               progress: Callable[[int], None] | None = None) -> dict[str, float]:
+                               progress: Callable[[int], None] | None = None,
+                               counterfactuals: bool = False) -> dict[str, float]:
         """Play ``demo_policy`` (anything with SB3's ``predict(obs, deterministic=True)``, e.g. the
         shelf heuristics) in the training env for ``n_steps`` steps of every sub-env and store its
         transitions as demonstrations: kept for the whole run, drawn as ``demo_fraction`` of each
         batch and trained with the margin loss. Episodes are cut where the steps run out; the env
-        is reset before and after. Returns episodes, successes and steps played.
+        is reset before and after. Returns episodes, successes and steps played, and the
+        counterfactual transitions stored.
+
+        ``counterfactuals``: a demonstrator that tries actions in a copy of the env before acting
+        (e.g. ``shelf_env``'s lookahead teachers) reports, through a ``counterfactuals()`` method
+        called after each ``predict``, the actions it rejected because they end the episode, each
+        as ``(action, reward, next_observation)``. They are kept as terminal transitions of the
+        same state, with the TD loss only (not the margin loss, `add_demonstration`'s
+        ``expert=False``): the learner then sees what the rejected action would have cost. One
+        env only (the demonstrator probes that env).
         """
         if self.env is None:
             raise ValueError("collect_demonstrations needs the model's env; load the model with env=...")
@@ -573,12 +583,20 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
                 f"demonstration policy {type(demo_policy).__name__} acts in {space} but the model's action "
                 f"layout is {self.action_space} ({describe_layout(self.policy.maps)}): build it on the same env layout"
             )
+        report: Any = getattr(demo_policy, "counterfactuals", None)
+        if counterfactuals and not callable(report):
+            raise ValueError(f"counterfactuals=True needs a demonstrator with a counterfactuals() method (one that "
+                             f"tries actions before acting); {type(demo_policy).__name__} has none")
+        if counterfactuals and self.env.num_envs != 1:
+            raise ValueError(f"counterfactuals=True needs one env (the demonstrator probes it), the model has "
+                             f"{self.env.num_envs}")
         buffer = self.replay_buffer
         assert isinstance(buffer, HindsightRelabelReplayBuffer)  # _setup_model checks the class
         env = self.env
         n_actions = int(self.action_space.n)
+        capacity = capacity or 2 * n_steps * env.num_envs
         obs = np.asarray(env.reset())  # check_spaces allows Box observations only
-        episodes = successes = 0
+        episodes = successes = stored = 0
         for step in range(n_steps):
             actions = np.asarray(demo_policy.predict(obs, deterministic=True)[0]).reshape(-1).astype(np.int64)
             if actions.shape != (env.num_envs,) or not ((actions >= 0) & (actions < n_actions)).all():
@@ -586,19 +604,35 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
                     f"demonstration policy {type(demo_policy).__name__} returned actions {actions.tolist()}; "
                     f"expected {env.num_envs} action(s) in [0, {n_actions})"
                 )
+            if counterfactuals:  # before the step: the same state, other actions
+                for action, reward, next_obs in report():
+                    self._check_counterfactual(demo_policy, action, next_obs, n_actions)
+                    buffer.add_demonstration(obs, np.asarray(next_obs)[None], np.array([action]),
+                                             np.array([reward], dtype=np.float32), np.array([True]), [{}],
+                                             capacity=capacity, expert=False)
+                    stored += 1
             new_obs, rewards, dones, infos = env.step(actions)
             episodes += int(dones.sum())
             successes += sum(bool(info.get("is_success")) for done, info in zip(dones, infos) if done)
             buffer.add_demonstration(obs, self._final_observations(new_obs, dones, infos), actions, rewards, dones,
-                                     infos, self._next_masks(new_obs, dones, infos),
-                                     capacity=capacity or 2 * n_steps * env.num_envs)
+                                     infos, self._next_masks(new_obs, dones, infos), capacity=capacity)
             obs = np.asarray(new_obs)
             if progress is not None:
                 progress(step + 1)
         self.demo_timesteps += n_steps * env.num_envs
         self._last_obs = env.reset()  # type: ignore[assignment]
         self._last_episode_starts = np.ones(env.num_envs, dtype=bool)
-        return {"episodes": episodes, "successes": successes, "steps": n_steps * env.num_envs}
+        return {"episodes": episodes, "successes": successes, "steps": n_steps * env.num_envs,
+                "counterfactuals": stored}
+
+    def _check_counterfactual(self, demo_policy: Any, action: Any, next_obs: Any, n_actions: int) -> None:
+        """A clear error for a counterfactual that does not fit the model's layout."""
+        shape = self.observation_space.shape
+        if not isinstance(action, (int, np.integer)) or not 0 <= int(action) < n_actions \
+                or np.shape(next_obs) != shape:
+            raise ValueError(f"demonstrator {type(demo_policy).__name__} reported a counterfactual with action "
+                             f"{action!r} and next observation of shape {np.shape(next_obs)}; expected an action in "
+                             f"[0, {n_actions}) and shape {shape}")
 
     def predict(
         self,

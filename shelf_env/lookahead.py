@@ -34,11 +34,11 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import json
 import os
 import pathlib
+import pickle
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import gymnasium as gym
@@ -71,6 +71,8 @@ class Outcome:
     fell: bool
     is_success: bool
     obs_sha256: str  # digest of the next observation, to check that the copy is exact
+    #: the next observation itself (None where an Outcome is made by hand); not compared
+    next_obs: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def valid(self) -> bool:
@@ -105,10 +107,10 @@ def probe_step(env: gym.Env, action: int) -> Outcome:
             obs, reward, terminated, _, info = base.step(int(action))
             payload = {"reward": float(reward), "terminated": bool(terminated), "fell": bool(info["fell"]),
                        "is_success": bool(info["is_success"]),
-                       "obs_sha256": digest(obs)}
+                       "obs_sha256": digest(obs), "next_obs": np.asarray(obs)}
         except BaseException as err:  # noqa: BLE001  (reported to the parent, which raises it)
             payload, status = {"error": f"{type(err).__name__}: {err}"}, 1
-        data = json.dumps(payload).encode()
+        data = pickle.dumps(payload)  # this process's own copy: a trusted pickle
         while data:
             data = data[os.write(write_fd, data):]
         os._exit(status)
@@ -120,7 +122,7 @@ def probe_step(env: gym.Env, action: int) -> Outcome:
     os.waitpid(pid, 0)
     if not chunks:
         raise RuntimeError(f"probe_step: the forked copy stepping action {action} died without a report")
-    report = json.loads(b"".join(chunks))
+    report = pickle.loads(b"".join(chunks))  # noqa: S301  (written by our own fork above)
     if "error" in report:
         raise RuntimeError(f"probe_step: stepping action {action} in the forked copy failed: {report['error']}")
     return Outcome(**report)
@@ -141,6 +143,32 @@ class LookaheadHeuristic(PickHeuristic):
         self.max_probes = max_probes
         self.pushes = pushes
         self.stats = dict.fromkeys(STAT_KEYS, 0)
+        self._probed: list[tuple[int, Outcome]] = []  # the last decision's probes
+        self._taken: int | None = None  # and its action
+
+    def _act(self, obs: np.ndarray) -> int:
+        self._probed = []
+        self._taken = super()._act(obs)
+        return self._taken
+
+    def counterfactuals(self) -> list[tuple[int, float, np.ndarray]]:
+        """The actions that the last decision probed and rejected because they would have ended the
+        episode invalid (a fall, a scene not at rest), as ``(action, reward, next observation)``,
+        exactly what the env's step would have returned. A learner of the demonstrations stores
+        them as terminal transitions (`PixelDoubleDQN.collect_demonstrations` with
+        ``counterfactuals=True``): they show, in the very state, which picks drop an object, which
+        the demonstrated action alone does not. Rejected pushes that kept the scene valid but moved
+        nothing are left out (not terminal: their next state's mask is unknown). Empty before the
+        first decision and after one with a single image (`predict` of a batch keeps the last)."""
+        return [(action, outcome.reward, outcome.next_obs) for action, outcome in self._probed
+                if outcome.terminated and not outcome.valid and action != self._taken
+                and outcome.next_obs is not None]
+
+    def _probe(self, action: int) -> Outcome:
+        self.stats["probes"] += 1
+        outcome = probe_step(self.env, action)
+        self._probed.append((action, outcome))
+        return outcome
 
     def score(self, view: ObservationView) -> np.ndarray:
         return self.base.score(view)
@@ -195,15 +223,13 @@ class LookaheadHeuristic(PickHeuristic):
             cells, prefix = self.uncover_candidates(view), "uncover_"
         self.stats[prefix + "decisions"] += 1
         for i, (row, col) in enumerate(cells[:self.max_probes]):
-            self.stats["probes"] += 1
-            if probe_step(self.env, self._pick(row, col)).valid:
+            if self._probe(self._pick(row, col)).valid:
                 self.stats[prefix + "vetoes"] += int(i > 0)
                 return self._pick(row, col)
         if self.pushes:  # every pick probed is invalid: a push that keeps the scene valid and changes it
             now = digest(obs)
             for action in self.push_candidates(view)[:self.max_probes]:
-                self.stats["probes"] += 1
-                outcome = probe_step(self.env, action)
+                outcome = self._probe(action)
                 if outcome.valid and outcome.obs_sha256 != now:
                     self.stats["push_rescues"] += 1
                     return action

@@ -67,6 +67,10 @@ class TrainConfig:
     demo_steps: int = 400
     demo_objects: tuple[int, ...] = (3,)  # N of the demonstration episodes, steps split evenly
     demo_fraction: float = 0.5
+    # the lookahead teachers' rejected actions (those their probe saw end the episode invalid) kept as
+    # terminal transitions of the same state, trained with the TD loss only
+    # (PixelDoubleDQN.collect_demonstrations's counterfactuals)
+    demo_counterfactuals: bool = False
     margin: float = 0.1
     margin_weight: float = 1.0
     # lever 3: exact-symmetry augmentation
@@ -131,6 +135,12 @@ class TrainConfig:
         for key, allowed in choices.items():
             if getattr(self, key) not in allowed:
                 raise ValueError(f"TrainConfig.{key} must be one of {list(allowed)}, got {getattr(self, key)!r}")
+        if not isinstance(self.demo_counterfactuals, bool):
+            raise ValueError("TrainConfig.demo_counterfactuals must be true or false, got "
+                             f"{self.demo_counterfactuals!r}")
+        if self.demo_counterfactuals and self.demo_policy not in SIMULATOR_DEMOS:
+            raise ValueError(f"TrainConfig.demo_counterfactuals needs a demonstrator that probes the simulator "
+                             f"({list(SIMULATOR_DEMOS)}), got demo_policy {self.demo_policy!r}")
         if not isinstance(self.safe_picks, bool):
             raise ValueError(f"TrainConfig.safe_picks must be true or false, got {self.safe_picks!r}")
         names = self.primitives
@@ -263,12 +273,15 @@ def collect_demonstrations(model: Any, config: TrainConfig, demos: Any, set_num_
     each part); returns the seconds it took."""
     start = time.monotonic()
     per_n = max(1, config.demo_steps // len(config.demo_objects))
-    capacity = 2 * per_n * len(config.demo_objects)
+    # each step and its relabelled twin, and room for the rejected actions when they are kept
+    capacity = (4 if config.demo_counterfactuals else 2) * per_n * len(config.demo_objects)
     for n in config.demo_objects:
         set_num_objects(n)
-        stats = model.collect_demonstrations(demos, per_n, capacity=capacity)
+        stats = model.collect_demonstrations(demos, per_n, capacity=capacity,
+                                             counterfactuals=config.demo_counterfactuals)
+        kept = f", {stats['counterfactuals']} rejected actions kept" if config.demo_counterfactuals else ""
         log(f"demonstrations: {config.demo_policy} at N = {n}, {stats['steps']} steps, {stats['episodes']} "
-            f"episodes, {stats['successes']} sorted")
+            f"episodes, {stats['successes']} sorted{kept}")
     seconds = time.monotonic() - start
     log(f"demonstrations took {seconds:.0f} s")
     return seconds

@@ -110,3 +110,28 @@ def test_fifty_thousand_shelf_transitions_with_masks_fit_in_4_1_gb():
                                                    "dones", "timeouts", "next_masks"))
     assert buf.next_masks.nbytes == 50_000 * 3 * 80 * 120 // 8  # one bit per action
     assert total <= 4.1e9
+
+
+def test_kept_transitions_carry_their_expert_flag_through_sampling_and_pickling():
+    # add_demonstration(expert=False): kept and drawn like a demonstration, not flagged for the margin
+    buf = HindsightRelabelReplayBuffer(8, OBS_SPACE, ACT_SPACE, device="cpu")
+    for i in range(3):
+        buf.add_demonstration(obs(i), obs(i + 1), np.array([i]), np.array([0.0]), np.array([1.0]), [{}], capacity=10)
+        buf.add_demonstration(obs(i), obs(i + 2), np.array([100 + i]), np.array([-10.0]), np.array([1.0]), [{}],
+                              capacity=10, expert=False)
+    demos = buf.demonstrations
+    assert demos.n_stored == 6 and demos.expert[:6].tolist() == [True, False] * 3
+    batch = buf.sample_arrays(64, 0.5, np.random.default_rng(0))  # the ring is empty: every row a kept one
+    assert (batch.is_demo == (batch.actions < 100)).all() and batch.is_demo.any() and not batch.is_demo.all()
+    assert (batch.rewards[~batch.is_demo] == -10.0).all() and (batch.dones == 1.0).all()
+    buf.add(obs(7), obs(8), np.array([7]), np.array([0.0]), np.array([0.0]), [{}])
+    mixed = buf.sample_arrays(64, 0.5, np.random.default_rng(1))
+    ring = mixed.actions == 7
+    assert ring.sum() == 32 and not mixed.is_demo[ring].any()  # the ring's rows are never demonstrations
+    back = pickle.loads(pickle.dumps(buf))
+    assert back.demonstrations.expert[:6].tolist() == [True, False] * 3 and back.demonstrations._expert
+    old = demos.__getstate__()  # a store pickled before the flag existed: every row was the demonstrator's
+    del old["expert"], old["_expert"]
+    restored = HindsightRelabelReplayBuffer.__new__(HindsightRelabelReplayBuffer)
+    restored.__setstate__(old)
+    assert restored.expert[:6].all() and restored._expert and len(restored.expert) == 10

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from shelf_env import evaluation as ev
-from shelf_env import lookahead
+from shelf_env import lookahead, params
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, ObservationView
 from shelf_env.lookahead import (
     STAT_KEYS,
@@ -51,6 +51,7 @@ def test_probe_reports_exactly_what_the_step_does_and_leaves_the_env_untouched()
             action = int(AccessibilityHeuristic(env).predict(obs)[0])
             first, again = probe_step(env, action), probe_step(env, action)
             assert first == again  # the first probe changed nothing in the parent
+            assert sha(first.next_obs) == first.obs_sha256 and first.next_obs.shape == obs.shape
             obs, reward, terminated, _, info = env.step(action)
             assert (first.obs_sha256, first.reward, first.terminated, first.fell, first.is_success) == (
                 sha(obs), reward, terminated, info["fell"], info["is_success"])
@@ -65,10 +66,15 @@ def test_lookahead_vetoes_the_pick_that_drags_the_neighbour_out(env):
     plain = int(DistanceHeuristic(env).predict(obs)[0])
     assert probe_step(env, plain).fell  # H-d's own choice drops the front box
     look = LookaheadDistance(env)
+    assert look.counterfactuals() == []  # no decision yet
     action = int(look.predict(obs)[0])
     _, row, col = env.decode_action(action)
     assert abs(env.codec.cell_centre(row, col)[0] - 0.06) < 0.04  # the front box instead
     assert stats(look) == {"decisions": 1, "probes": 2, "vetoes": 1}
+    # the vetoed pick is its counterfactual: the terminal step the env would have returned
+    [(rejected, reward, next_obs)] = look.counterfactuals()
+    assert rejected == plain and reward == params.REWARD_INVALID
+    assert sha(next_obs) == probe_step(env, plain).obs_sha256 != sha(obs)
     _, reward, _, _, info = env.step(action)
     assert not info["fell"] and reward != -10 and len(env.world.objects) == 2
 
@@ -79,6 +85,7 @@ def test_lookahead_keeps_the_base_choice_when_it_is_valid_or_nothing_is(env):
     look = LookaheadAccessibility(env, pushes=False)
     assert int(look.predict(obs)[0]) == int(AccessibilityHeuristic(env).predict(obs)[0])
     assert stats(look) == {"decisions": 1, "probes": 1, "unavoidable": 1}
+    assert look.counterfactuals() == []  # its one probed pick is the one it takes
     obs, _ = env.reset(seed=5, options={"num_objects": 2})  # its first H-a pick is fine: one probe
     look = LookaheadAccessibility(env)
     action = int(look.predict(obs)[0])

@@ -201,7 +201,7 @@ def test_demonstrations_are_kept_flagged_and_trained_with_the_margin():
     model = make_model(env, learning_starts=0, demo_fraction=0.5, buffer_size=20)
     stats = model.collect_demonstrations(SquarePolicy(env), 12)
     demos = model.replay_buffer.demonstrations
-    assert stats == {"episodes": 12, "successes": 12, "steps": 12} and demos.n_stored == 12
+    assert stats == {"episodes": 12, "successes": 12, "steps": 12, "counterfactuals": 0} and demos.n_stored == 12
     assert model.num_timesteps == 0 and model.demo_timesteps == 12
     model.learn(40)  # the ring (20 slots) wraps twice; the demonstrations stay
     assert model.replay_buffer.full and model.replay_buffer.demonstrations.n_stored == 12
@@ -212,6 +212,53 @@ def test_demonstrations_are_kept_flagged_and_trained_with_the_margin():
     model.train(3, batch_size=16)
     assert model.logger.name_to_value["train/margin_loss"] >= 0
     assert any(not th.equal(before[k], v) for k, v in model.q_net.state_dict().items())
+
+
+class ProbingSquarePolicy(SquarePolicy):
+    """SquarePolicy that reports, after each predict, one rejected action (the same pixel on the pick
+    map) as ending the episode with reward -10, as a teacher that probes a copy of the env would."""
+
+    def __init__(self, env: FindTheSquareEnv, report=None) -> None:
+        super().__init__(env)
+        self.report = report
+        self.last = None
+
+    def predict(self, obs, deterministic=True):
+        actions, state = super().predict(obs, deterministic)
+        self.last = np.asarray(obs).reshape(-1, *self.env.observation_space.shape)[0]
+        return actions, state
+
+    def counterfactuals(self):
+        if self.report is not None:
+            return self.report(self.last)
+        action = int(self.env.good_map * HW + np.argmax(self.last[0].reshape(-1) > 0))
+        return [(action - self.env.good_map * HW, -10.0, np.zeros_like(self.last))]
+
+
+def test_counterfactuals_are_kept_as_terminal_transitions_of_the_same_state_without_the_margin():
+    env = FindTheSquareEnv(n_maps=3, good_map=2)
+    model = make_model(env, learning_starts=0, demo_fraction=0.5, buffer_size=20)
+    stats = model.collect_demonstrations(ProbingSquarePolicy(env), 5, counterfactuals=True)
+    assert stats == {"episodes": 5, "successes": 5, "steps": 5, "counterfactuals": 5}
+    assert model.demo_timesteps == 5 and model.num_timesteps == 0  # counterfactuals are not env steps
+    demos = model.replay_buffer.demonstrations
+    assert demos.n_stored == 10 and demos.expert[:10].tolist() == [False, True] * 5  # each before its step
+    rejected, shown = np.arange(0, 10, 2), np.arange(1, 10, 2)
+    assert np.array_equal(demos.observations[rejected], demos.observations[shown])  # the same state
+    assert (demos.actions[rejected, 0, 0] < HW).all() and (demos.actions[shown, 0, 0] >= 2 * HW).all()
+    assert (demos.rewards[rejected, 0] == -10.0).all() and (demos.dones[rejected, 0] == 1.0).all()
+    batch = model.replay_buffer.sample_arrays(32, 1.0, np.random.default_rng(0))
+    assert (batch.is_demo == (batch.actions >= 2 * HW)).all()  # margin rows: the demonstrated actions only
+    # without the option nothing else is stored, and a demonstrator without the method is refused
+    plain = make_model(env, learning_starts=0, demo_fraction=0.5)
+    assert plain.collect_demonstrations(ProbingSquarePolicy(env), 3)["counterfactuals"] == 0
+    assert plain.replay_buffer.demonstrations.n_stored == 3
+    with pytest.raises(ValueError, match="needs a demonstrator with a counterfactuals\\(\\) method.*SquarePolicy"):
+        plain.collect_demonstrations(SquarePolicy(env), 3, counterfactuals=True)
+    for report in (lambda o: [(10**6, -10.0, o)], lambda o: [(0, -10.0, o[0])], lambda o: [(0.5, -10.0, o)]):
+        with pytest.raises(ValueError, match="reported a counterfactual with action .* expected an action in "
+                                             "\\[0, 720\\) and shape \\(4, 12, 20\\)"):
+            plain.collect_demonstrations(ProbingSquarePolicy(env, report), 2, counterfactuals=True)
 
 
 def test_demonstration_policy_on_the_wrong_layout_is_refused():

@@ -6,9 +6,10 @@ import pytest
 
 from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env import evaluation as ev
+from shelf_env import params
 from shelf_env.heuristics import DistanceHeuristic
 from shelf_env.symmetry import MirrorWidth, PermuteClasses
-from shelf_env.training import PRESETS, TrainConfig, demo_policy, make_env, make_model
+from shelf_env.training import PRESETS, TrainConfig, collect_demonstrations, demo_policy, make_env, make_model
 
 
 def test_paper_preset_keeps_the_papers_values():
@@ -65,6 +66,49 @@ def test_lookahead_teacher_probes_the_training_env_it_demonstrates_in():
     demos = model.replay_buffer.demonstrations
     assert demos is not None and demos.n_stored >= 6
     env.close()
+
+
+def test_lookahead_teacher_counterfactuals_are_kept_as_terminal_non_expert_transitions(monkeypatch):
+    # demo_counterfactuals: every pick the teacher rejected (its probe ended the episode invalid) is
+    # stored before the step as a terminal transition with the env's reward, without the margin flag
+    from shelf_env import lookahead
+
+    config = PRESETS["recipe"].replace(buffer_size=50, widths=(4, 8, 8), start_objects=2, demo_steps=6,
+                                       demo_objects=(2,), demo_policy="h-d-lookahead", demo_counterfactuals=True)
+    env = make_env(config)
+    model = make_model(config, env)
+    teacher = demo_policy(config, env)
+    real_probe = lookahead.probe_step
+    first_probes: list[int] = []
+
+    def probe(probed_env, action):  # the first candidate of every decision "falls": each step has a veto
+        outcome = real_probe(probed_env, action)
+        if not teacher._probed:
+            first_probes.append(action)
+            return lookahead.Outcome(params.REWARD_INVALID, True, True, False, "x", outcome.next_obs)
+        return outcome
+
+    monkeypatch.setattr(lookahead, "probe_step", probe)
+    lines: list[str] = []
+    collect_demonstrations(model, config, teacher, env.get_wrapper_attr("set_num_objects"), log=lines.append)
+    demos = model.replay_buffer.demonstrations
+    kept = ~demos.expert[:demos.n_stored]
+    # each decision's first probe, unless the teacher took it anyway (every probe invalid)
+    expected = len(first_probes) - teacher.stats["unavoidable"] - teacher.stats["uncover_unavoidable"]
+    assert kept.sum() == expected >= 1 and f"{expected} rejected actions kept" in lines[0]
+    assert set(demos.actions[:demos.n_stored][kept, 0, 0]) <= set(first_probes)
+    assert (demos.rewards[:demos.n_stored][kept, 0] == params.REWARD_INVALID).all()
+    assert (demos.dones[:demos.n_stored][kept, 0] == 1.0).all()
+    env.close()
+
+
+@pytest.mark.parametrize("changes, match", [
+    ({"demo_counterfactuals": True}, "needs a demonstrator that probes the simulator .* got demo_policy 'h-a'"),
+    ({"demo_counterfactuals": "yes", "demo_policy": "h-d-lookahead"}, "must be true or false, got 'yes'"),
+])
+def test_counterfactuals_need_a_lookahead_teacher(changes, match):
+    with pytest.raises(ValueError, match=match):
+        PRESETS["p_s"].replace(**changes)
 
 
 def test_heuristic_demonstrations_fill_the_kept_store_and_a_wrong_layout_is_refused():
