@@ -159,7 +159,8 @@ class LookaheadHeuristic(PickHeuristic):
         ``counterfactuals=True``): they show, in the very state, which picks drop an object, which
         the demonstrated action alone does not. Rejected pushes that kept the scene valid but moved
         nothing are left out (not terminal: their next state's mask is unknown). Empty before the
-        first decision and after one with a single image (`predict` of a batch keeps the last)."""
+        first decision and after one that probed nothing (nothing visible); after `predict` of a
+        batch, those of its last image."""
         return [(action, outcome.reward, outcome.next_obs) for action, outcome in self._probed
                 if outcome.terminated and not outcome.valid and action != self._taken
                 and outcome.next_obs is not None]
