@@ -249,7 +249,7 @@ class HindsightRelabelReplayBuffer(ReplayBuffer):
         dones = self.dones[inds, 0] * (1 - self.timeouts[inds, 0])
         return TransitionBatch(
             self.observations[inds, 0], self.actions[inds, 0, 0].astype(np.int64), self.next_observations[inds, 0],
-            self.rewards[inds, 0].astype(np.float32), dones.astype(np.float32), masks, self.expert[inds].copy(),
+            self.rewards[inds, 0].astype(np.float32), dones.astype(np.float32), masks, self.expert[inds],
         )
 
     # ------------------------------------------------------------------ pickling

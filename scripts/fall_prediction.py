@@ -22,7 +22,6 @@ import argparse
 import pathlib
 
 import gymnasium as gym
-import numpy as np
 import torch as th
 
 from sb3_pixeldqn import PixelDoubleDQN
@@ -32,13 +31,6 @@ from shelf_env.evaluation import scene_seed
 from shelf_env.lookahead import LookaheadDistance, probe_step
 
 HELD_OUT_SEED = 5  # scene_seed's seed index: the evaluations use 0..2, training its own RNG
-
-
-def q_values(model: PixelDoubleDQN, obs: np.ndarray) -> np.ndarray:
-    """The checkpoint's Q of every action (flat, the env's action order) for one observation."""
-    with th.no_grad():
-        obs_t = th.as_tensor(obs[None], device=model.device)
-        return model.q_net.q_maps(obs_t.float() / 255).flatten(1)[0].cpu().numpy()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -67,8 +59,9 @@ def main(argv: list[str] | None = None) -> int:
                 rejected = [a for a, _, _ in teacher.counterfactuals()]
                 mask = env.action_masks()
                 for name, model in models.items():
-                    q = q_values(model, obs)
-                    invalid = int(not probe_step(env, int(np.argmax(np.where(mask, q, -np.inf)))).valid)
+                    q = model.policy.q_map_values(obs).reshape(-1)  # the env's action order
+                    greedy = int(model.predict(obs, deterministic=True, action_masks=mask)[0])
+                    invalid = int(not probe_step(env, greedy).valid)
                     c = counts[name]
                     if rejected:
                         c["decisions"] += 1
