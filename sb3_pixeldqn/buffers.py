@@ -41,6 +41,9 @@ from stable_baselines3.common.buffers import ReplayBuffer
 
 #: The info key of the hindsight protocol.
 RELABEL_KEY = "relabelled"
+#: The info key of the correction protocol (`sb3_pixeldqn.pixel_dqn`, ``PixelDoubleDQN``'s
+#: "Corrections"): the env executed another action than the one it was given.
+CORRECTION_KEY = "correction"
 RELABEL_MODES = ("changed", "all", "off")
 NOOP_MODES = ("keep", "penalty", "terminal")
 _ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts", "next_masks", "expert")

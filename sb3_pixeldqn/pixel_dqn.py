@@ -23,6 +23,20 @@ can then never win an argmax. ``masked=False`` keeps the paper's all-pixel argma
 the training env; its transitions go to a store the replay ring never overwrites, and
 ``demo_fraction`` of every batch is drawn from it with the margin loss.
 
+**Corrections** (DAgger-style, while training, `store_corrections`): an env (or a
+wrapper around it, e.g. a supervisor that tries each action in a simulator copy first) may execute
+another action than the one it was given. It then says so in that step's info:
+
+    info["correction"] = {"action": a_vetoed, "executed": a_taken, "reward": r_vetoed,
+                            "next_obs": o_vetoed, "terminated": bool}
+
+The step's transition is stored with the executed action (it is what produced the next state), and
+both halves of the correction are kept in the demonstration store: the vetoed action with what it
+would have led to (TD loss only, ``expert=False``; a non-terminal one with every next action
+allowed) and the executed transition as a demonstration (margin loss). So the learner is corrected
+in exactly the states its own policy reaches. ``n_corrections`` counts them
+(``rollout/corrections`` in the logs).
+
 **Augmentation** (``augment=``): callables ``(obs, action, next_obs, next_mask, rng) -> (obs,
 action, next_obs, next_mask)`` applied to every sampled transition, each drawing its own element
 of a symmetry group of the task. The algorithm knows nothing of what they mean; an env package
@@ -64,7 +78,7 @@ from stable_baselines3.common.utils import polyak_update, should_collect_more_st
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_pixeldqn.actor import ActingRules, ActorVecEnv
-from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer, TransitionBatch
+from sb3_pixeldqn.buffers import CORRECTION_KEY, HindsightRelabelReplayBuffer, TransitionBatch
 from sb3_pixeldqn.files import write_atomically
 from sb3_pixeldqn.policies import FCNPolicy, PixelQNetwork, check_action_masks, describe_layout, masked_argmax
 
@@ -91,6 +105,8 @@ DEMO_FRACTION = 0.25
 #: The info key an env may set at an episode's end with the mask of its final observation (the
 #: VecEnv has already reset when the algorithm could ask for it).
 FINAL_MASK_KEY = "action_mask"
+#: Slots of the demonstration store when a correction creates it (`store_corrections`).
+CORRECTION_CAPACITY = 20_000
 #: Steps over which ``rollout/noop_rate`` is averaged.
 NOOP_WINDOW = 200
 
@@ -241,6 +257,8 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         #: Written by `CurriculumCallback` so that training resumes at its stage after load.
         self.curriculum_state: dict[str, Any] | None = None
         self._noop_history: deque[bool] = deque(maxlen=NOOP_WINDOW)
+        #: Env steps whose action the env replaced (`store_corrections`; saved with the model).
+        self.n_corrections = 0
         if _init_setup_model:
             self._setup_model()
 
@@ -453,9 +471,11 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             if not callback.on_step():
                 return RolloutReturn(num_collected_steps, num_collected_episodes, continue_training=False)
             self._update_info_buffer(infos, dones)
-            noops = replay_buffer.add(transition.obs, self._final_observations(new_obs, dones, infos), actions,
-                                      rewards, dones, infos,
-                                      next_action_masks=transition.next_mask if self._use_masks else None)
+            next_obs = self._final_observations(new_obs, dones, infos)
+            next_masks = transition.next_mask if self._use_masks else None
+            stored = self.store_corrections(transition.obs, actions, next_obs, rewards, dones, infos, next_masks)
+            noops = replay_buffer.add(transition.obs, next_obs, stored, rewards, dones, infos,
+                                      next_action_masks=next_masks)
             self._noop_history.extend(noops)
             self._last_obs = self._last_original_obs = new_obs
             self._update_current_progress_remaining(self.num_timesteps, self._total_timesteps)
@@ -549,11 +569,58 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         next_obs = self._final_observations(new_obs, dones, infos)
         masks = self._next_masks(new_obs, dones, infos)
         assert isinstance(replay_buffer, HindsightRelabelReplayBuffer)  # _setup_model checks the class
-        noops = replay_buffer.add(np.asarray(self._last_obs), next_obs, buffer_action, reward, dones, infos,
-                                  next_action_masks=masks)
+        obs = np.asarray(self._last_obs)
+        buffer_action = self.store_corrections(obs, buffer_action, next_obs, reward, dones, infos, masks)
+        noops = replay_buffer.add(obs, next_obs, buffer_action, reward, dones, infos, next_action_masks=masks)
         self._noop_history.extend(noops)
         self._last_obs = new_obs
         self._last_original_obs = new_obs
+
+    def store_corrections(self, obs: np.ndarray, actions: np.ndarray, next_obs: np.ndarray, rewards: np.ndarray,
+                            dones: np.ndarray, infos: list[dict[str, Any]],
+                            next_masks: np.ndarray | None) -> np.ndarray:
+        """The actions to store for one step of the envs (``obs``: the states acted in, ``next_obs``:
+        the states reached, final observations put back): ``actions`` with each env's executed action
+        where its info reports a correction (see the module docstring). Each correction's
+        vetoed action (TD loss only) and executed transition (a demonstration) go to the
+        demonstration store, created with `CORRECTION_CAPACITY` slots if there is none yet."""
+        actions = np.array(actions, dtype=np.int64, copy=True).reshape(-1)
+        buffer = self.replay_buffer
+        assert isinstance(buffer, HindsightRelabelReplayBuffer)  # _setup_model checks the class
+        for i, info in enumerate(infos):
+            report = info.get(CORRECTION_KEY)
+            if report is None:
+                continue
+            vetoed, executed, reward, vetoed_next, terminated = self._check_correction(report)
+            obs_i = np.asarray(obs[i])[None]
+            buffer.add_demonstration(obs_i, vetoed_next[None], np.array([vetoed]),
+                                     np.array([reward], dtype=np.float32), np.array([terminated]), [{}],
+                                     capacity=CORRECTION_CAPACITY, expert=False)
+            mask_i = None if next_masks is None else np.asarray(next_masks)[i:i + 1]
+            buffer.add_demonstration(obs_i, np.asarray(next_obs[i])[None], np.array([executed]),
+                                     np.asarray(rewards, dtype=np.float32).reshape(-1)[i:i + 1],
+                                     np.asarray(dones).reshape(-1)[i:i + 1], [info], mask_i,
+                                     capacity=CORRECTION_CAPACITY)
+            actions[i] = executed
+            self.n_corrections += 1
+        if hasattr(self, "_logger"):  # set up by learn
+            self.logger.record("rollout/corrections", self.n_corrections)
+        return actions
+
+    def _check_correction(self, report: Any) -> tuple[int, int, float, np.ndarray, bool]:
+        """``info["correction"]``'s fields, or a clear error naming what does not fit the model."""
+        n_actions = int(self.action_space.n)
+        keys = ("action", "executed", "reward", "next_obs", "terminated")
+        if not isinstance(report, dict) or not set(keys) <= set(report):
+            raise ValueError(f'info["{CORRECTION_KEY}"] must be a dict with keys {list(keys)}, got {report!r:.200}')
+        actions = (report["action"], report["executed"])
+        next_obs = np.asarray(report["next_obs"])
+        if not all(isinstance(a, (int, np.integer)) and 0 <= int(a) < n_actions for a in actions) \
+                or next_obs.shape != self.observation_space.shape:
+            raise ValueError(f'info["{CORRECTION_KEY}"] reports actions {actions} and a next_obs of shape '
+                             f"{next_obs.shape}; expected actions in [0, {n_actions}) and shape "
+                             f"{self.observation_space.shape}")
+        return int(actions[0]), int(actions[1]), float(report["reward"]), next_obs, bool(report["terminated"])
 
     def collect_demonstrations(self, demo_policy: Any, n_steps: int, capacity: int | None = None,
                                progress: Callable[[int], None] | None = None,

@@ -311,6 +311,13 @@ class ShelfSortEnv(gym.Env):
             raise RuntimeError("call reset() first")
         return self._semantic
 
+    @property
+    def observation(self) -> np.ndarray:
+        """A copy of the current observation (what the last reset, `set_scene` or step returned)."""
+        if self._obs is None:
+            raise RuntimeError("call reset() first")
+        return self._obs.copy()
+
     def decode_action(self, action) -> tuple[str, int, int]:
         """(map name, row, col) of a flat action index; ValueError if it is not one (`ActionCodec.decode`)."""
         return self.codec.decode(action)

@@ -39,12 +39,13 @@ import pathlib
 import pickle
 import sys
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
 import pybullet as pb
 
+from sb3_pixeldqn.buffers import CORRECTION_KEY
 from sb3_pixeldqn.files import write_atomically
 from shelf_env import params
 from shelf_env.env import ShelfSortEnv
@@ -250,6 +251,46 @@ class LookaheadDistance(LookaheadHeuristic):
 
     def __init__(self, env: gym.Env, max_probes: int | None = None, pushes: bool = True) -> None:
         super().__init__(env, DistanceHeuristic, max_probes, pushes)
+
+
+class FallGuard(gym.Wrapper):
+    """A privileged supervisor of a learner in training (DAgger-style corrections): every action is
+    first tried in a forked copy of the env (`probe_step`); one that would end the episode invalid
+    (an object falls, the scene does not come to rest) is replaced by the ``teacher``'s choice (a
+    lookahead heuristic, built on the wrapped env) and the step's info reports the correction in
+    sb3_pixeldqn's protocol (``info["correction"]``: the vetoed action, what the env's step would
+    have returned for it, and the executed action), which `PixelDoubleDQN` stores as a correction.
+    Where the teacher finds nothing better (it chooses the same action) the action is executed as
+    given. ``stats`` counts steps, corrections and probes (the teacher's included).
+
+    The negatives then sit where the learner's own (ε-)greedy policy goes, which the teacher's
+    demonstrations and counterfactuals (one candidate cell per object) do not reach
+    (``results/p_s_la/fall_prediction.md``). Training only: it reads the simulator, which a robot
+    cannot fork, and costs one extra env action per step (more on a correction).
+    """
+
+    def __init__(self, env: gym.Env, teacher: type[LookaheadHeuristic] | None = None) -> None:
+        super().__init__(env)
+        self.teacher = (teacher or LookaheadDistance)(env)
+        self.stats = {"steps": 0, "corrections": 0, "probes": 0}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        action = int(action)
+        self.stats["steps"] += 1
+        self.stats["probes"] += 1
+        outcome = probe_step(self.env, action)
+        executed = action
+        if not outcome.valid:
+            probes = self.teacher.stats["probes"]
+            state = self.env.unwrapped.observation  # type: ignore[attr-defined]  # probe_step checked the env
+            executed = int(np.asarray(self.teacher.predict(state, deterministic=True)[0]).reshape(-1)[0])
+            self.stats["probes"] += self.teacher.stats["probes"] - probes
+        obs, reward, terminated, truncated, info = self.env.step(executed)
+        if executed != action:
+            self.stats["corrections"] += 1
+            info = {**info, CORRECTION_KEY: {"action": action, "executed": executed, "reward": outcome.reward,
+                                             "next_obs": outcome.next_obs, "terminated": outcome.terminated}}
+        return obs, float(reward), terminated, truncated, info
 
 
 # ---------------------------------------------------------------- what the lookahead's episodes met

@@ -37,7 +37,7 @@ from sb3_pixeldqn.callbacks import GATES
 from shelf_env import params
 from shelf_env.actions import PRIMITIVES, ActionCodec
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
-from shelf_env.lookahead import LookaheadAccessibility, LookaheadDistance, LookaheadHeuristic
+from shelf_env.lookahead import FallGuard, LookaheadAccessibility, LookaheadDistance, LookaheadHeuristic
 from shelf_env.objects import OBJECT_SETS
 from shelf_env.symmetry import MirrorWidth, PermuteClasses
 
@@ -71,6 +71,10 @@ class TrainConfig:
     # terminal transitions of the same state, trained with the TD loss only
     # (PixelDoubleDQN.collect_demonstrations's counterfactuals)
     demo_counterfactuals: bool = False
+    # a privileged supervisor of the training env (a key of SIMULATOR_DEMOS; None: none): every action
+    # the learner takes is tried in a copy of the simulator first and one that would drop an object is
+    # replaced by that teacher's, the correction kept (shelf_env.lookahead.FallGuard, DAgger-style)
+    guard: str | None = None
     margin: float = 0.1
     margin_weight: float = 1.0
     # lever 3: exact-symmetry augmentation
@@ -141,6 +145,9 @@ class TrainConfig:
         if self.demo_counterfactuals and self.demo_policy not in SIMULATOR_DEMOS:
             raise ValueError(f"TrainConfig.demo_counterfactuals needs a demonstrator that probes the simulator "
                              f"({list(SIMULATOR_DEMOS)}), got demo_policy {self.demo_policy!r}")
+        if self.guard is not None and self.guard not in SIMULATOR_DEMOS:
+            raise ValueError(f"TrainConfig.guard must be a teacher that probes the simulator ({list(SIMULATOR_DEMOS)}) "
+                             f"or None, got {self.guard!r}")
         if not isinstance(self.safe_picks, bool):
             raise ValueError(f"TrainConfig.safe_picks must be true or false, got {self.safe_picks!r}")
         names = self.primitives
@@ -226,11 +233,27 @@ def make_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any)
                     **kwargs)
 
 
+def make_training_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any) -> gym.Env:
+    """The env the learner acts in: `make_env`, under ``config.guard``'s supervisor (`FallGuard`) if
+    it names one. Greedy checks, evaluations and demonstrations use `make_env` (no supervisor)."""
+    env = make_env(config, num_objects, **kwargs)
+    return guarded(config, env)
+
+
+def guarded(config: TrainConfig, env: gym.Env) -> gym.Env:
+    """``env`` under ``config.guard``'s supervisor (`FallGuard`), or ``env`` itself when it has none."""
+    if config.guard is None:
+        return env
+    teacher = DEMO_POLICIES[config.guard]  # TrainConfig.check allows only SIMULATOR_DEMOS
+    assert issubclass(teacher, LookaheadHeuristic)
+    return FallGuard(env, teacher)
+
+
 def make_actor_env(config: TrainConfig, threads: int = 1) -> Any:
     """The training env of ``config`` in an actor process (`sb3_pixeldqn.actor.ActorVecEnv`, lever 9)."""
     from sb3_pixeldqn.actor import ActorVecEnv
 
-    return ActorVecEnv(functools.partial(make_env, config), max_lag=config.actor_max_lag,
+    return ActorVecEnv(functools.partial(make_training_env, config), max_lag=config.actor_max_lag,
                        sync_every=config.actor_sync_every, threads=threads)
 
 
@@ -240,7 +263,7 @@ def make_parallel_env(config: TrainConfig, seed: int) -> VecEnv:
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
-    return make_vec_env(functools.partial(make_env, config), n_envs=config.n_envs, seed=seed,
+    return make_vec_env(functools.partial(make_training_env, config), n_envs=config.n_envs, seed=seed,
                         vec_env_cls=SubprocVecEnv)
 
 
@@ -273,8 +296,11 @@ def collect_demonstrations(model: Any, config: TrainConfig, demos: Any, set_num_
     each part); returns the seconds it took."""
     start = time.monotonic()
     per_n = max(1, config.demo_steps // len(config.demo_objects))
-    # each step and its relabelled twin, and room for the rejected actions when they are kept
+    # each step and its relabelled twin, and room for the rejected actions when they are kept, and for
+    # a supervisor's corrections (`FallGuard`) when there is one
     capacity = (4 if config.demo_counterfactuals else 2) * per_n * len(config.demo_objects)
+    if config.guard is not None:
+        capacity += config.buffer_size
     for n in config.demo_objects:
         set_num_objects(n)
         stats = model.collect_demonstrations(demos, per_n, capacity=capacity,

@@ -149,6 +149,9 @@ class RecipeCallback(BaseCallback):
         if config.actor:
             raise ValueError("actor: true in the yml, but rl-zoo3 builds and steps its own envs; train with "
                              "`shelf-train --actor` for an actor process, or set actor: false")
+        if config.guard is not None:
+            raise ValueError(f"guard: {config.guard} in the yml, but rl-zoo3 builds and steps its own envs; train with "
+                             "`shelf-train` for a supervised training env, or set guard: null")
         if config.n_envs > 1:
             raise ValueError(f"n_envs: {config.n_envs} in the recipe callback's fields, but rl-zoo3 builds its own "
                              "envs: set the yml's own n_envs instead")

@@ -102,3 +102,31 @@ class CoinEnv(FindTheSquareEnv):
         success = bool(self.np_random.random() < self.p_success)
         info = {"is_success": success, "num_objects": self.num_objects}
         return self._obs(), (0.0 if success else -1.0), True, False, info
+
+
+class SquareSupervisor(gym.Wrapper):
+    """Intervenes (sb3_pixeldqn's ``info["correction"]``) on every action off the square of the
+    paying map: executes the square's centre on that map instead and reports the vetoed action as
+    ending the episode with reward -10 and an all-zero next observation, as `shelf_env.lookahead.
+    FallGuard` reports a vetoed pick. ``report`` replaces the report (to test bad ones)."""
+
+    def __init__(self, env: FindTheSquareEnv, report=None) -> None:
+        super().__init__(env)
+        self.report = report
+        self.corrections = 0
+
+    def step(self, action):
+        base = self.env.unwrapped
+        action = int(action)
+        executed = action
+        if not base.on_square(action):
+            _, h, w = base.shape
+            executed = base.good_map * h * w + base._centre[0] * w + base._centre[1]
+        vetoed_next = np.zeros(base.shape, dtype=np.uint8)
+        obs, reward, terminated, truncated, info = self.env.step(executed)
+        if executed != action:
+            self.corrections += 1
+            report = {"action": action, "executed": executed, "reward": -10.0, "next_obs": vetoed_next,
+                      "terminated": True}
+            info = {**info, "correction": report if self.report is None else self.report(report)}
+        return obs, reward, terminated, truncated, info

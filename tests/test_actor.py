@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 import pytest
-from pixel_envs import CoinEnv, FindTheSquareEnv
+from pixel_envs import CoinEnv, FindTheSquareEnv, SquareSupervisor
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -206,3 +206,18 @@ def test_bad_input_and_misuse_give_clear_errors(actor_envs):
     env._process.join()
     with pytest.raises(RuntimeError, match="actor process died"):
         env.get_attr("num_objects")
+
+
+def test_corrections_reported_by_the_actors_env_are_stored_as_in_process(actor_envs):
+    env = actor_envs(lambda: SquareSupervisor(FindTheSquareEnv(n_maps=1)), max_lag=4, sync_every=10)
+    model = PixelDoubleDQN("FCNPolicy", env, policy_kwargs=TINY, learning_starts=10**6, masked=False,
+                           masked_exploration=False, buffer_size=100, seed=0)
+    model.learn(20)  # uniform exploratory actions: nearly all miss the 3x3 square and are replaced
+    n = model.n_corrections
+    assert n >= 15
+    ring, demos = model.replay_buffer, model.replay_buffer.demonstrations
+    assert ring.n_stored == 20 and (ring.rewards[:20, 0] == 0).all()  # each executed action solved its episode
+    assert demos.n_stored == 2 * n and demos.expert[:2 * n].tolist() == [False, True] * n
+    assert (demos.rewards[0:2 * n:2, 0] == -10).all() and (demos.dones[0:2 * n:2, 0] == 1).all()
+    # the kept executed actions are the ring's: each correction's step, stored with what was executed
+    assert set(demos.actions[1:2 * n:2, 0, 0].tolist()) <= set(ring.actions[:20, 0, 0].tolist())

@@ -14,6 +14,7 @@ from shelf_env import lookahead, params
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, ObservationView
 from shelf_env.lookahead import (
     STAT_KEYS,
+    FallGuard,
     LookaheadAccessibility,
     LookaheadDistance,
     LookaheadHeuristic,
@@ -183,3 +184,27 @@ def test_bad_input():
         probe_step(gym.make("CartPole-v1"), 0)
     with pytest.raises(RuntimeError, match="closed"):
         probe_step(env, 0)
+
+
+def test_fall_guard_replaces_the_dragging_pick_by_the_teachers_and_reports_the_correction(env):
+    obs, _ = env.set_scene(SCENE, DRAG_REGIONS)
+    plain = int(DistanceHeuristic(env).predict(obs)[0])
+    vetoed = probe_step(env, plain)
+    assert vetoed.fell  # the learner's action here would drop the front box
+    teacher_choice = int(LookaheadDistance(env).predict(obs)[0])
+    guard = FallGuard(env)  # H-d with the lookahead by default
+    obs, reward, _, _, info = guard.step(plain)
+    report = info["correction"]
+    assert (report["action"], report["executed"]) == (plain, teacher_choice) and teacher_choice != plain
+    assert report["reward"] == params.REWARD_INVALID and report["terminated"]
+    assert sha(report["next_obs"]) == vetoed.obs_sha256  # what the vetoed step would have returned
+    assert not info["fell"] and reward != params.REWARD_INVALID and len(env.world.objects) == 2
+    assert guard.stats == {"steps": 1, "corrections": 1, "probes": 3}  # its probe, then the teacher's two
+    # a valid action is executed as given: one probe, no report, the step the env would take
+    action = int(LookaheadDistance(env).predict(obs)[0])
+    expected = probe_step(env, action)
+    assert expected.valid
+    obs, reward, terminated, _, info = guard.step(action)
+    assert "correction" not in info and (sha(obs), reward, terminated) == (
+        expected.obs_sha256, expected.reward, expected.terminated)
+    assert guard.stats == {"steps": 2, "corrections": 1, "probes": 4}

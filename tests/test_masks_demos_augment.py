@@ -7,7 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from pixel_envs import CoinEnv, FindTheSquareEnv
+from pixel_envs import CoinEnv, FindTheSquareEnv, SquareSupervisor
 from stable_baselines3.common.logger import configure
 
 from sb3_pixeldqn import CurriculumCallback, HindsightRelabelReplayBuffer, PixelDoubleDQN
@@ -385,3 +385,32 @@ def test_greedy_checks_act_as_the_model_was_trained(monkeypatch):
         gate = CurriculumCallback(gate="greedy", eval_env=CoinEnv(p_success=1.0), eval_every=3, eval_episodes=2)
         model.learn(4, callback=gate)
         assert seen and all((m is not None) == expect_masks for m in seen)
+
+
+def test_corrections_store_the_executed_action_and_keep_both_halves_of_the_correction():
+    sup = SquareSupervisor(FindTheSquareEnv(n_maps=3, good_map=2, relabel=True))
+    model = make_model(sup, learning_starts=10**6, buffer_size=200)  # every action exploratory, no training
+    model.learn(30)
+    ring, demos = model.replay_buffer, model.replay_buffer.demonstrations
+    assert 10 <= sup.corrections == model.n_corrections < 30  # a masked draw hits map 2 a third of the time
+    assert model.logger.name_to_value["rollout/corrections"] == model.n_corrections
+    # the ring holds what happened: every episode succeeded with the executed action, on the paying map
+    assert ring.n_stored == 30 and (ring.actions[:30, 0, 0] >= 2 * HW).all() and (ring.rewards[:30, 0] == 0).all()
+    # kept: per correction the vetoed action (terminal, -10, TD only) then the executed transition
+    n = model.n_corrections
+    assert demos.n_stored == 2 * n and demos.expert[:2 * n].tolist() == [False, True] * n
+    vetoed, shown = np.arange(0, 2 * n, 2), np.arange(1, 2 * n, 2)
+    assert np.array_equal(demos.observations[vetoed], demos.observations[shown])  # the same state
+    assert (demos.actions[vetoed, 0, 0] < 2 * HW).all() and (demos.actions[shown, 0, 0] >= 2 * HW).all()
+    assert (demos.rewards[vetoed, 0] == -10).all() and (demos.dones[vetoed, 0] == 1).all()
+    assert (demos.next_observations[vetoed] == 0).all() and (demos.rewards[shown, 0] == 0).all()
+    # the executed transition succeeded, so it has no relabelled twin (the env relabels failures only)
+    batch = model.replay_buffer.sample_arrays(32, 1.0, np.random.default_rng(0))
+    assert (batch.is_demo == (batch.actions >= 2 * HW)).all()
+    # a report that does not fit the model is named
+    bad_reports = (lambda r: {**r, "executed": 10**6}, lambda r: {**r, "next_obs": r["next_obs"][0]},
+                   lambda r: {k: v for k, v in r.items() if k != "reward"})
+    for bad in bad_reports:
+        model = make_model(SquareSupervisor(FindTheSquareEnv(n_maps=3, good_map=2), bad), learning_starts=10**6)
+        with pytest.raises(ValueError, match='info\\["correction"\\]'):
+            model.learn(10)

@@ -102,7 +102,28 @@ def test_lookahead_teacher_counterfactuals_are_kept_as_terminal_non_expert_trans
     env.close()
 
 
+def test_the_guard_supervises_the_training_env_only():
+    from shelf_env.lookahead import FallGuard, LookaheadAccessibility
+    from shelf_env.training import make_actor_env, make_training_env
+
+    config = PRESETS["recipe"].replace(start_objects=2, guard="h-a-lookahead")
+    env = make_training_env(config)
+    assert isinstance(env, FallGuard) and isinstance(env.teacher, LookaheadAccessibility)
+    assert env.teacher.env is env.env  # the teacher probes the env the guard wraps
+    env.close()
+    plain = make_env(config)  # greedy checks, evaluations and demonstrations: no supervisor
+    assert not isinstance(plain, FallGuard)
+    plain.close()
+    assert not isinstance(make_training_env(config.replace(guard=None)), FallGuard)
+    actor = make_actor_env(config)
+    try:
+        assert actor.env_is_wrapped(FallGuard) == [True]
+    finally:
+        actor.close()
+
+
 @pytest.mark.parametrize("changes, match", [
+    ({"guard": "h-a"}, "guard must be a teacher that probes the simulator .* got 'h-a'"),
     ({"demo_counterfactuals": True}, "needs a demonstrator that probes the simulator .* got demo_policy 'h-a'"),
     ({"demo_counterfactuals": "yes", "demo_policy": "h-d-lookahead"}, "must be true or false, got 'yes'"),
 ])

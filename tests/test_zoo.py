@@ -71,6 +71,11 @@ def test_recipe_callback_refuses_fields_no_run_could_use():
     actor.init_callback(model)
     with pytest.raises(ValueError, match="shelf-train --actor"):
         actor.on_training_start({}, {})
+    # so is the supervisor of the training env (shelf-train wraps the env it builds; rl-zoo3 builds its own)
+    guard = RecipeCallback(verbose=0, guard="h-d-lookahead")
+    guard.init_callback(model)
+    with pytest.raises(ValueError, match="guard: h-d-lookahead in the yml.*set guard: null"):
+        guard.on_training_start({}, {})
     # parallel envs are rl-zoo3's own n_envs; the lookahead teacher needs the one training env itself
     parallel = RecipeCallback(verbose=0, n_envs=4)
     parallel.init_callback(model)
