@@ -23,9 +23,9 @@ can then never win an argmax. ``masked=False`` keeps the paper's all-pixel argma
 the training env; its transitions go to a store the replay ring never overwrites, and
 ``demo_fraction`` of every batch is drawn from it with the margin loss.
 
-**Corrections** (DAgger-style, while training, `store_corrections`): an env (or a
-wrapper around it, e.g. a supervisor that tries each action in a simulator copy first) may execute
-another action than the one it was given. It then says so in that step's info:
+**Corrections** (DAgger-style, while training, `store_corrections`): an env (or a wrapper around
+it, e.g. a supervisor that tries each action in a simulator copy first) may execute another action
+than the one it was given. It then says so in that step's info:
 
     info["correction"] = {"action": a_vetoed, "executed": a_taken, "reward": r_vetoed,
                             "next_obs": o_vetoed, "terminated": bool}
@@ -577,8 +577,8 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         self._last_original_obs = new_obs
 
     def store_corrections(self, obs: np.ndarray, actions: np.ndarray, next_obs: np.ndarray, rewards: np.ndarray,
-                            dones: np.ndarray, infos: list[dict[str, Any]],
-                            next_masks: np.ndarray | None) -> np.ndarray:
+                          dones: np.ndarray, infos: list[dict[str, Any]],
+                          next_masks: np.ndarray | None) -> np.ndarray:
         """The actions to store for one step of the envs (``obs``: the states acted in, ``next_obs``:
         the states reached, final observations put back): ``actions`` with each env's executed action
         where its info reports a correction (see the module docstring). Each correction's
@@ -615,8 +615,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             raise ValueError(f'info["{CORRECTION_KEY}"] must be a dict with keys {list(keys)}, got {report!r:.200}')
         actions = (report["action"], report["executed"])
         next_obs = np.asarray(report["next_obs"])
-        if not all(isinstance(a, (int, np.integer)) and 0 <= int(a) < n_actions for a in actions) \
-                or next_obs.shape != self.observation_space.shape:
+        if not self._fits_layout(actions, next_obs):
             raise ValueError(f'info["{CORRECTION_KEY}"] reports actions {actions} and a next_obs of shape '
                              f"{next_obs.shape}; expected actions in [0, {n_actions}) and shape "
                              f"{self.observation_space.shape}")
@@ -692,11 +691,16 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         return {"episodes": episodes, "successes": successes, "steps": n_steps * env.num_envs,
                 "counterfactuals": stored}
 
+    def _fits_layout(self, actions: Sequence[Any], next_obs: Any) -> bool:
+        """Whether ``actions`` are integer actions of this model and ``next_obs`` has its observation shape."""
+        n_actions = int(self.action_space.n)
+        return all(isinstance(a, (int, np.integer)) and 0 <= int(a) < n_actions for a in actions) \
+            and np.shape(next_obs) == self.observation_space.shape
+
     def _check_counterfactual(self, demo_policy: Any, action: Any, next_obs: Any, n_actions: int) -> None:
         """A clear error for a counterfactual that does not fit the model's layout."""
         shape = self.observation_space.shape
-        if not isinstance(action, (int, np.integer)) or not 0 <= int(action) < n_actions \
-                or np.shape(next_obs) != shape:
+        if not self._fits_layout((action,), next_obs):
             raise ValueError(f"demonstrator {type(demo_policy).__name__} reported a counterfactual with action "
                              f"{action!r} and next observation of shape {np.shape(next_obs)}; expected an action in "
                              f"[0, {n_actions}) and shape {shape}")

@@ -188,6 +188,7 @@ def test_bad_input():
 
 def test_fall_guard_replaces_the_dragging_pick_by_the_teachers_and_reports_the_correction(env):
     obs, _ = env.set_scene(SCENE, DRAG_REGIONS)
+    assert np.array_equal(env.observation, obs)  # what the guard's teacher decides on
     plain = int(DistanceHeuristic(env).predict(obs)[0])
     vetoed = probe_step(env, plain)
     assert vetoed.fell  # the learner's action here would drop the front box
@@ -208,3 +209,10 @@ def test_fall_guard_replaces_the_dragging_pick_by_the_teachers_and_reports_the_c
     assert "correction" not in info and (sha(obs), reward, terminated) == (
         expected.obs_sha256, expected.reward, expected.terminated)
     assert guard.stats == {"steps": 2, "corrections": 1, "probes": 4}
+    assert np.array_equal(env.observation, obs)
+    fresh = gym.make("ShelfSort-v0", num_objects=1).unwrapped
+    try:
+        with pytest.raises(RuntimeError, match="call reset"):
+            fresh.observation  # noqa: B018  (the property raises)
+    finally:
+        fresh.close()
