@@ -11,7 +11,10 @@ the cells already on disk, so an interrupted evaluation resumes. A checkpoint's 
 by its file stem, and ``<out>/cells/<stem>.sha256`` records which file they came from: another file
 of that name (a retrained model shipped again) is refused instead of inheriting them.
 ``--reuse-cells FOLDER`` copies the grid's cells that another folder, evaluated under the same
-conditions (and from the same checkpoint files), already holds. At the end (or with
+conditions (and from the same checkpoint files), already holds. Episodes are bit-identical on one
+machine, not across machines: PyBullet's floating point differs between CPUs (5 of H-d's 30
+episodes at N = 8, seed 0, ended differently on two machines: SR 36.7 vs 40.0), so cells run on
+another machine are the same scenes but not exactly the same episodes. At the end (or with
 ``--summarize-only``) it writes ``results.csv``, ``results.json`` (with this configuration) and
 ``sr_ae_mae_<set>.png`` (Fig. 10), plus ``train_vs_test.png`` (Fig. 12) when both object sets
 were evaluated.
@@ -196,8 +199,9 @@ def reuse_cells(source: pathlib.Path, todo: list[Job], paths: dict[Job, pathlib.
     """Copy the cells of ``todo`` that ``source`` (checked by `check_reuse`) holds; returns how many.
 
     A cell depends only on (policy, N, seed, runs) and the conditions (episodes are history-free),
-    so such a folder holds the very episodes this evaluation would run. A checkpoint's cells are
-    taken only where ``source`` recorded which file they came from."""
+    so such a folder holds the episodes this evaluation would run, bit for bit if it was run on the
+    same machine (see the module docstring). A checkpoint's cells are taken only where ``source``
+    recorded which file they came from."""
     copied = 0
     for job in todo:
         cell = source / "cells" / paths[job].name
