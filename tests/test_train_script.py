@@ -202,3 +202,36 @@ def test_parallel_envs_keep_the_replay_ratio_and_a_run_moves_between_machines(tm
     assert model.gradient_steps == 1 and model._n_updates == 2 * 2 + 1  # step 9 trains once, 10 stops
     assert train.main([*common, "--n-envs", "0", "--max-steps", "12"]) == 2  # a clear error, nothing run
     assert "n_envs must be an integer >= 1" in capsys.readouterr().err
+
+
+def test_a_supervised_run_replaces_the_vetoed_actions_and_keeps_them(tmp_path, capsys, monkeypatch):
+    """--set guard=...: the learner's steps go through FallGuard (here every push "drops an object",
+    every pick is fine): the ring holds only the executed picks, the demonstration store each
+    correction's vetoed push and executed pick; guard cannot be amended on a resumed run."""
+    from sb3_pixeldqn import PixelDoubleDQN
+    from shelf_env import lookahead, params
+
+    real_probe = lookahead.probe_step
+
+    def probe(env, action):
+        outcome = real_probe(env, action)
+        if env.unwrapped.codec.decode(action)[0].startswith("push"):
+            return lookahead.Outcome(params.REWARD_INVALID, True, True, False, "x", outcome.next_obs)
+        return outcome
+
+    monkeypatch.setattr(lookahead, "probe_step", probe)
+    common = ["--out", str(tmp_path), "--learning-starts", "100", "--buffer-size", "200", "--widths", "4", "8", "8",
+              "--checkpoint-minutes", "0", "--threads", "1", "--set", "demo_policy=null", "--set", "eval_every=1000",
+              "--set", "guard=h-d-lookahead", "--start-objects", "2"]
+    assert train.main([*common, "--max-steps", "8"]) == 0
+    assert "supervised by h-d-lookahead" in capsys.readouterr().out
+    model = PixelDoubleDQN.load(tmp_path / "model.zip")
+    model.load_replay_buffer(tmp_path / "replay.pkl")
+    ring, demos = model.replay_buffer, model.replay_buffer.demonstrations
+    maps = [model.policy.maps[int(a) // (ring.observations.shape[-2] * ring.observations.shape[-1])][0]
+            for a in ring.actions[:ring.n_stored, 0, 0]]
+    assert set(maps) == {"pick"} and model.n_corrections >= 1  # the random masked actions included pushes
+    vetoed = ~demos.expert[:demos.n_stored]
+    assert vetoed.sum() == model.n_corrections and (demos.rewards[:demos.n_stored][vetoed, 0] == -10).all()
+    assert train.main([*common, "--max-steps", "9", "--amend", "guard=null"]) == 2
+    assert "cannot change ['guard']" in capsys.readouterr().err

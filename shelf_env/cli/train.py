@@ -69,11 +69,12 @@ from shelf_env.training import (
 )
 
 #: TrainConfig fields ``--amend`` may change in a resumed run: what the curriculum callback reads
-#: when it is built, and how the env steps are collected (in an actor process or not, supervised or not); nothing the
-#: saved model or its replay buffer depends on.
+#: when it is built, and how the env steps are collected (in an actor process or not); nothing the
+#: saved model or its replay buffer depends on. Not ``guard``: its corrections need room in the
+#: demonstration store, which is sized when the run's demonstrations are collected.
 AMENDABLE = ("max_stage_timesteps", "min_stage_timesteps", "max_objects", "eval_every", "eval_episodes",
              "eval_max_actions", "eval_actions_per_object", "tb_images_every", "actor", "actor_max_lag",
-             "actor_sync_every", "n_envs", "guard")
+             "actor_sync_every", "n_envs")
 EPISODE_FIELDS = ["timestep", "wall_seconds", "num_objects", "success", "actions", "return", "fell"]
 
 
@@ -390,9 +391,11 @@ def train(args: argparse.Namespace) -> None:
     if budget.wall_seconds() >= budget.budget_seconds or model.num_timesteps >= args.max_steps:
         print("budget already spent; nothing to do")
         return
-    if config.guard is not None and not config.actor and config.n_envs == 1:  # the learner's steps are supervised
-        model.set_env(guarded(config, env))
-        print(f"supervised by {config.guard} (FallGuard): vetoed actions are replaced and kept", flush=True)
+    if config.guard is not None:  # the learner's steps are supervised (the actor's and parallel envs build it)
+        if not config.actor and config.n_envs == 1:
+            model.set_env(guarded(config, env))
+        print(f"supervised by {config.guard} (FallGuard): actions that would drop an object are replaced, both "
+              "kept", flush=True)
     if config.actor:  # lever 9: from here on the env steps come from an actor process
         th.set_num_threads(max(1, args.threads - 1))
         model.set_env(make_actor_env(config))
