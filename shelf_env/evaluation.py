@@ -66,6 +66,9 @@ class EpisodeRecord:
     #: The episode's share of the policy's own counters, for a policy with a ``stats`` dict of ints
     #: (the lookahead's vetoes and unavoidable steps, `shelf_env.lookahead.STAT_KEYS`); empty otherwise.
     policy_stats: dict[str, int] = field(default_factory=dict)
+    #: The machine that played the episode (`machine_label`), "" for cells written before this
+    #: field existed. Episodes are bit-identical on one machine, not across machines.
+    machine: str = ""
 
 
 #: Failure categories of `classify_failure`, from the episode's trace.
@@ -256,6 +259,32 @@ def make_env(policy: str, num_objects: int, object_set: str = "ycb", primitives:
                     pixel_size=policy_pixel_size(policy), **check_conditions(conditions))
 
 
+@functools.lru_cache(maxsize=1)
+def machine_label() -> str:
+    """This machine as evaluation records name it: CPU model, architecture, OS, and the versions of
+    PyBullet and NumPy. PyBullet's floating point differs between CPUs, so one scene can end
+    differently on two machines (on two machines, 5 of H-d's 30 episodes at N = 8, seed 0, did)."""
+    import platform
+    from importlib.metadata import version
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    return f"{cpu} ({platform.machine()}, {platform.system()}), pybullet {version('pybullet')}, numpy {np.__version__}"
+
+
+def machines(records: list[EpisodeRecord]) -> dict[str, int]:
+    """Episodes per machine that played them (`EpisodeRecord.machine`; "unrecorded" for old cells)."""
+    counts: dict[str, int] = {}
+    for r in records:
+        key = r.machine or "unrecorded"
+        counts[key] = counts.get(key, 0) + 1
+    return dict(sorted(counts.items()))
+
+
 def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_set: str = "ycb",
                   primitives: tuple[str, ...] | None = None,
                   conditions: dict[str, Any] | None = None) -> list[EpisodeRecord]:
@@ -266,7 +295,7 @@ def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_se
         agent = make_policy(policy, env, seed=scene_seed(seed, num_objects, 10**6))  # its own stream
         return [
             EpisodeRecord(policy_label(policy), object_set, num_objects, seed, run,
-                          **run_episode(env, agent, scene_seed(seed, num_objects, run)))
+                          **run_episode(env, agent, scene_seed(seed, num_objects, run)), machine=machine_label())
             for run in range(runs)
         ]
     finally:
@@ -404,6 +433,7 @@ def write_results(out: pathlib.Path, records: list[EpisodeRecord], config: dict[
         per_seed.setdefault(f"{r.policy}|{r.object_set}|{r.num_objects}|{r.seed}", []).append(r)
     write_json_atomically(out / "results.json", {
         "config": config,
+        "machines": machines(records),
         "summary": rows,
         "per_seed": {k: seed_metrics(v) for k, v in sorted(per_seed.items())},
     })

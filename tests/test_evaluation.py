@@ -129,7 +129,19 @@ def test_cli_writes_results_and_resumes(tmp_path, capsys):
     assert data["summary"][0]["policy"] == "h-a" and data["summary"][0]["seeds"] == 2
     assert (tmp_path / "results.csv").exists() and (tmp_path / "sr_ae_mae_train.png").stat().st_size > 10_000
     assert evaluate_cli.main(argv) == 0
-    assert "2 already on disk, 0 to run" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "2 already on disk, 0 to run" in out and "machines" not in out
+    # every episode names the machine that played it; results.json counts them
+    assert data["machines"] == {ev.machine_label(): 2} and "pybullet" in ev.machine_label()
+    # a cell written before the field existed (or on another machine): counted, and the CLI says so
+    cell = next((tmp_path / "cells").glob("*seed1*.json"))
+    old = [{k: v for k, v in r.items() if k != "machine"} for r in json.loads(cell.read_text())]
+    cell.write_text(json.dumps(old))
+    assert ev.load_cell(cell)[0].machine == ""
+    assert evaluate_cli.main([*argv, "--summarize-only"]) == 0
+    assert "these episodes were played on 2 machines" in capsys.readouterr().out
+    assert json.loads((tmp_path / "results.json").read_text())["machines"] == {ev.machine_label(): 1,
+                                                                             "unrecorded": 1}
 
 
 def test_a_label_stands_for_one_checkpoint_file(tmp_path, capsys):

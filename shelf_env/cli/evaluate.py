@@ -14,7 +14,9 @@ of that name (a retrained model shipped again) is refused instead of inheriting 
 conditions (and from the same checkpoint files), already holds. Episodes are bit-identical on one
 machine, not across machines: PyBullet's floating point differs between CPUs (5 of H-d's 30
 episodes at N = 8, seed 0, ended differently on two machines: SR 36.7 vs 40.0), so cells run on
-another machine are the same scenes but not exactly the same episodes. At the end (or with
+another machine are the same scenes but not exactly the same episodes. Each episode record names
+the machine that played it (``machine``), ``results.json`` counts episodes per machine and the
+command prints a note when they come from more than one. At the end (or with
 ``--summarize-only``) it writes ``results.csv``, ``results.json`` (with this configuration) and
 ``sr_ae_mae_<set>.png`` (Fig. 10), plus ``train_vs_test.png`` (Fig. 12) when both object sets
 were evaluated.
@@ -293,6 +295,11 @@ def main(argv: list[str] | None = None) -> int:
     for row in rows:
         print(f"{row['policy']:>8s} {row['object_set']:>5s} N={row['num_objects']:2d}  "
               f"SR {row['sr_mean']:5.1f} ± {row['sr_std']:4.1f}  AE {row['ae_mean']:.2f}  mAE {row['mae_mean']:.2f}")
+    played_on = ev.machines(records)
+    if len(played_on) > 1:
+        print(f"note: these episodes were played on {len(played_on)} machines (results.json's machines); episodes "
+              "are bit-identical on one machine, not across machines: " + "; ".join(
+                  f"{name}: {count}" for name, count in played_on.items()), flush=True)
     return 0
 
 
