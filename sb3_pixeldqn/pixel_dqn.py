@@ -593,9 +593,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
                 continue
             vetoed, executed, reward, vetoed_next, terminated = self._check_correction(report)
             obs_i = np.asarray(obs[i])[None]
-            buffer.add_demonstration(obs_i, vetoed_next[None], np.array([vetoed]),
-                                     np.array([reward], dtype=np.float32), np.array([terminated]), [{}],
-                                     capacity=CORRECTION_CAPACITY, expert=False)
+            self._keep_rejected(obs_i, vetoed, reward, vetoed_next, terminated, CORRECTION_CAPACITY)
             mask_i = None if next_masks is None else np.asarray(next_masks)[i:i + 1]
             buffer.add_demonstration(obs_i, np.asarray(next_obs[i])[None], np.array([executed]),
                                      np.asarray(rewards, dtype=np.float32).reshape(-1)[i:i + 1],
@@ -673,9 +671,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
             if counterfactuals:  # before the step: the same state, other actions
                 for action, reward, next_obs in report():
                     self._check_counterfactual(demo_policy, action, next_obs, n_actions)
-                    buffer.add_demonstration(obs, np.asarray(next_obs)[None], np.array([action]),
-                                             np.array([reward], dtype=np.float32), np.array([True]), [{}],
-                                             capacity=capacity, expert=False)
+                    self._keep_rejected(obs, action, reward, next_obs, True, capacity)
                     stored += 1
             new_obs, rewards, dones, infos = env.step(actions)
             episodes += int(dones.sum())
@@ -690,6 +686,17 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         self._last_episode_starts = np.ones(env.num_envs, dtype=bool)
         return {"episodes": episodes, "successes": successes, "steps": n_steps * env.num_envs,
                 "counterfactuals": stored}
+
+    def _keep_rejected(self, obs: np.ndarray, action: int, reward: float, next_obs: Any, terminated: bool,
+                       capacity: int) -> None:
+        """Keep an action that was not taken in state ``obs`` (``(1, *obs_shape)``), with what it would
+        have led to, in the demonstration store: TD loss only (``expert=False``); a non-terminal one
+        with every next action allowed. A teacher's counterfactual or a correction's vetoed action."""
+        buffer = self.replay_buffer
+        assert isinstance(buffer, HindsightRelabelReplayBuffer)  # _setup_model checks the class
+        buffer.add_demonstration(obs, np.asarray(next_obs)[None], np.array([action]),
+                                 np.array([reward], dtype=np.float32), np.array([terminated]), [{}],
+                                 capacity=capacity, expert=False)
 
     def _fits_layout(self, actions: Sequence[Any], next_obs: Any) -> bool:
         """Whether ``actions`` are integer actions of this model and ``next_obs`` has its observation shape."""

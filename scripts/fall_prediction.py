@@ -58,10 +58,13 @@ def main(argv: list[str] | None = None) -> int:
                 action = int(teacher.predict(obs)[0])
                 rejected = [a for a, _, _ in teacher.counterfactuals()]
                 mask = env.action_masks()
+                valid: dict[int, bool] = {}  # this state's probes: checkpoints often agree on the action
                 for name, model in models.items():
                     q = model.policy.q_map_values(obs).reshape(-1)  # the env's action order
                     greedy = int(model.predict(obs, deterministic=True, action_masks=mask)[0])
-                    invalid = int(not probe_step(env, greedy).valid)
+                    if greedy not in valid:
+                        valid[greedy] = probe_step(env, greedy).valid
+                    invalid = int(not valid[greedy])
                     c = counts[name]
                     if rejected:
                         c["decisions"] += 1

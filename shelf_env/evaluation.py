@@ -24,6 +24,7 @@ import json
 import math
 import os
 import pathlib
+from collections import Counter
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -278,11 +279,7 @@ def machine_label() -> str:
 
 def machines(records: list[EpisodeRecord]) -> dict[str, int]:
     """Episodes per machine that played them (`EpisodeRecord.machine`; "unrecorded" for old cells)."""
-    counts: dict[str, int] = {}
-    for r in records:
-        key = r.machine or "unrecorded"
-        counts[key] = counts.get(key, 0) + 1
-    return dict(sorted(counts.items()))
+    return dict(sorted(Counter(r.machine or "unrecorded" for r in records).items()))
 
 
 def evaluate_cell(policy: str, num_objects: int, seed: int, runs: int, object_set: str = "ycb",

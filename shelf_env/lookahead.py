@@ -272,22 +272,25 @@ class FallGuard(gym.Wrapper):
     def __init__(self, env: gym.Env, teacher: type[LookaheadHeuristic] | None = None) -> None:
         super().__init__(env)
         self.teacher = (teacher or LookaheadDistance)(env)
-        self.stats = {"steps": 0, "corrections": 0, "probes": 0}
+        self._steps = self._corrections = 0
+
+    @property
+    def stats(self) -> dict[str, int]:
+        """Steps, corrections and probes: one per step plus the teacher's (it probes only for the guard)."""
+        return {"steps": self._steps, "corrections": self._corrections,
+                "probes": self._steps + self.teacher.stats["probes"]}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         action = int(action)
-        self.stats["steps"] += 1
-        self.stats["probes"] += 1
+        self._steps += 1
         outcome = probe_step(self.env, action)
         executed = action
         if not outcome.valid:
-            probes = self.teacher.stats["probes"]
             state = self.env.unwrapped.observation  # type: ignore[attr-defined]  # probe_step checked the env
-            executed = int(np.asarray(self.teacher.predict(state, deterministic=True)[0]).reshape(-1)[0])
-            self.stats["probes"] += self.teacher.stats["probes"] - probes
+            executed = int(self.teacher.predict(state, deterministic=True)[0])
         obs, reward, terminated, truncated, info = self.env.step(executed)
         if executed != action:
-            self.stats["corrections"] += 1
+            self._corrections += 1
             info = {**info, CORRECTION_KEY: {"action": action, "executed": executed, "reward": outcome.reward,
                                              "next_obs": outcome.next_obs, "terminated": outcome.terminated}}
         return obs, float(reward), terminated, truncated, info
