@@ -232,9 +232,15 @@ def check_conditions(conditions: dict[str, Any] | None) -> dict[str, Any]:
     from shelf_env.perception import PerceptionNoise
 
     PerceptionNoise.from_any(conditions.get("perception_noise"))
-    for key in ("closed_loop", "safe_picks"):
-        if not isinstance(conditions.get(key, False), bool):
-            raise ValueError(f"{key} must be true or false, got {conditions[key]!r}")
+    if not isinstance(conditions.get("safe_picks", False), bool):
+        raise ValueError(f"safe_picks must be true or false, got {conditions['safe_picks']!r}")
+    if "closed_loop" in conditions:
+        from shelf_env.robot import DragWatch
+
+        if not isinstance(conditions["closed_loop"], (bool, dict)):  # JSON: no DragWatch objects
+            raise ValueError(f"closed_loop must be true, false or a dict of DragWatch fields, "
+                             f"got {conditions['closed_loop']!r}")
+        DragWatch.from_any(conditions["closed_loop"])
     if "physics" in conditions:
         from shelf_env.world import PHYSICS, Physics
 

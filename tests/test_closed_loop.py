@@ -8,6 +8,7 @@ import gymnasium as gym
 import pytest
 
 from shelf_env.objects import ObjectSpec
+from shelf_env.robot import DragWatch
 from tests.conftest import REGIONS
 
 
@@ -42,9 +43,56 @@ def test_closed_loop_catches_the_drag_and_puts_the_object_down():
     reward, terminated, info, positions = pick_back_box(DRAG_SCENE, closed_loop=True)
     assert not info["fell"] and reward == -1 and not terminated
     (event,) = info["interventions"]
-    assert event["primitive"] == "pick" and event["phase"] == "retreat" and event["reaction"] == "put down in place"
+    assert event["primitive"] == "pick" and event["phase"] == "retreat" and event["signal"] == "force"
     assert event["force_n"] > 0.25
+    # the default reaction carries the box back the whole way it came and puts it down where it was picked
+    carried = float(event["reaction"].removeprefix("carried back ").removesuffix(" m, put down"))
+    assert carried == pytest.approx(0.30 - event["tcp"][0], abs=0.01)
     assert len(positions) == 2 and (positions[:, 0] > 0).all()  # both objects still inside
+    assert positions[0] == pytest.approx([0.30, 0.0, 0.07], abs=0.005)
+
+
+def test_a_short_back_off_puts_the_object_down_where_it_was_caught():
+    reward, terminated, info, positions = pick_back_box(DRAG_SCENE, closed_loop=DragWatch(back_off=0.02))
+    assert not info["fell"] and not terminated
+    (event,) = info["interventions"]
+    assert event["reaction"] == "carried back 0.020 m, put down"
+    caught_x = event["tcp"][0]
+    assert positions[0, 0] == pytest.approx(caught_x + 0.02 + 0.0025, abs=0.01)  # the box hangs 2.5 mm behind the TCP
+    assert (positions[:, 0] > 0).all()
+
+
+def test_the_camera_check_sees_the_dragged_neighbour_come_towards_the_opening():
+    # force sensor off: only the camera watches; the neighbour is hidden under the carried box for
+    # most of the drag, so the camera sees it late (and it still falls), but it names the right object
+    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=DragWatch(force=False)).unwrapped
+    try:
+        env.reset(seed=0)
+        env.set_scene(DRAG_SCENE, REGIONS)
+        back, front = (o.uid for o in env.world.objects)
+        edges = env.watch_camera.front_edges([back, front])
+        # each box's front face (5 cm deep boxes at x = 0.30 and 0.06)
+        assert edges == {back: pytest.approx(0.275, abs=0.005), front: pytest.approx(0.035, abs=0.005)}
+        _, _, _, _, info = env.step(env.codec.action_at("pick", 0.30, 0.0))
+    finally:
+        env.close()
+    (event,) = info["interventions"]
+    assert event["signal"] == "camera" and event["object"] == front and event["shift_m"] > DragWatch().camera_shift
+
+
+def test_closed_loop_takes_a_drag_watch_and_refuses_anything_else():
+    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=DragWatch(threshold=0.5)).unwrapped
+    try:
+        assert env.drag_watch == DragWatch(threshold=0.5) and env.watch_camera is not None
+    finally:
+        env.close()
+    open_env = gym.make("ShelfSort-v0", num_objects=2).unwrapped
+    try:
+        assert open_env.drag_watch is None and open_env.watch_camera is None
+    finally:
+        open_env.close()
+    with pytest.raises(ValueError, match="closed_loop must be True, False, a dict of DragWatch fields or a DragWatch"):
+        gym.make("ShelfSort-v0", num_objects=2, closed_loop="yes")
 
 
 def test_closed_loop_leaves_a_clean_pick_alone():
@@ -54,3 +102,43 @@ def test_closed_loop_leaves_a_clean_pick_alone():
     assert closed[2]["interventions"] == []
     assert closed[0] == open_loop[0] and not closed[2]["fell"]
     assert closed[3] == pytest.approx(open_loop[3], abs=1e-6)  # the same motion, bit for bit up to float noise
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"sustian": 2}, r"unknown closed_loop keys \['sustian'\]"),
+    ({"threshold": -0.1}, "DragWatch.threshold must be a finite number >= 0"),
+    ({"camera_shift": float("nan")}, "DragWatch.camera_shift must be a finite number >= 0"),
+    ({"sustain": 0}, "DragWatch.sustain must be >= 1"),
+    ({"camera_every": 1.5}, "DragWatch.camera_every must be an integer >= 0"),
+    ({"speed_scale": 0}, r"DragWatch.speed_scale must be in \(0, 1\]"),
+    ({"force": 1}, "DragWatch.force must be True or False"),
+])
+def test_bad_watch_fields_are_named(fields, message):
+    with pytest.raises(ValueError, match=message):
+        DragWatch.from_any(fields)
+
+
+def test_from_any_reads_the_env_argument():
+    assert DragWatch.from_any(False) is None and DragWatch.from_any(True) == DragWatch()
+    assert DragWatch.from_any({"sustain": 2}) == DragWatch(sustain=2)
+    watch = DragWatch(force=False)
+    assert DragWatch.from_any(watch) is watch
+
+
+def test_speed_scale_slows_the_watched_retreat():
+    # the retreat of the clean pick (0.30 -> out of the opening, ~0.4 m at 0.25 m/s) is always simulated
+    # (a watched move); at half speed it takes ~twice the physics steps, and nothing is caught
+    steps = {}
+    for scale in (1.0, 0.5):
+        env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=DragWatch(speed_scale=scale)).unwrapped
+        try:
+            env.reset(seed=0)
+            env.set_scene(CLEAN_SCENE, REGIONS)
+            before = env.robot.physics_steps
+            _, _, _, _, info = env.step(env.codec.action_at("pick", 0.30, 0.0))
+            steps[scale] = env.robot.physics_steps - before
+            assert info["interventions"] == [] and not info["fell"]
+        finally:
+            env.close()
+    retreat = 0.40 / (0.25 * 1 / 240)  # physics steps of the retreat at full speed (TIME_STEP 1/240 s)
+    assert steps[0.5] - steps[1.0] == pytest.approx(retreat, rel=0.25)

@@ -1,5 +1,6 @@
 """The §V protocol: metrics on hand-made records, identical scenes, bad input, the CLI's resume."""
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -246,6 +247,31 @@ def test_evaluation_under_conditions_and_one_condition_set_per_folder(tmp_path, 
     ref = tmp_path / "ref"
     assert evaluate_cli.main([*grid, "--out", str(ref), "--physics", "reference"]) == 0
     assert json.loads((ref / "conditions.json").read_text()) == {"physics": "reference"}
+
+
+def test_closed_loop_conditions_record_every_field_of_the_watch(tmp_path, capsys):
+    from shelf_env.robot import DragWatch
+
+    grid = ["--policies", "h-d", "--ns", "1", "--runs", "1", "--seeds", "1", "--object-sets", "train",
+            "--workers", "1"]
+    default, variant = tmp_path / "default", tmp_path / "variant"
+    assert evaluate_cli.main([*grid, "--out", str(default), "--closed-loop"]) == 0
+    # the watch's fields, not `true`: a later change of DragWatch's defaults cannot resume this folder
+    assert json.loads((default / "conditions.json").read_text()) == {"closed_loop": dataclasses.asdict(DragWatch())}
+    assert evaluate_cli.main([*grid, "--out", str(variant), "--closed-loop", '{"sustain": 2}']) == 0
+    recorded = json.loads((variant / "conditions.json").read_text())["closed_loop"]
+    assert recorded == {**dataclasses.asdict(DragWatch()), "sustain": 2}
+    assert ev.make_env("h-d", 1, "train", conditions={"closed_loop": recorded}).unwrapped.drag_watch.sustain == 2
+    capsys.readouterr()
+    assert evaluate_cli.main([*grid, "--out", str(default), "--closed-loop", '{"sustain": 2}']) == 2
+    assert "use another --out" in capsys.readouterr().err
+    assert evaluate_cli.main([*grid, "--out", str(tmp_path / "bad"), "--closed-loop", '{"sustian": 2}']) == 2
+    assert "unknown closed_loop keys ['sustian']" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()
+    with pytest.raises(ValueError, match="closed_loop must be true, false or a dict of DragWatch fields"):
+        ev.check_conditions({"closed_loop": "yes"})
+    with pytest.raises(ValueError, match="DragWatch.threshold must be a finite number >= 0, got -1"):
+        ev.check_conditions({"closed_loop": {"threshold": -1}})
 
 
 def test_plot_conditions_draws_curves_from_two_evaluations(tmp_path, capsys):

@@ -32,6 +32,7 @@ history-free (`shelf_env.env`), so a cell's records depend only on (policy, N, s
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import multiprocessing as mp
 import os
@@ -74,6 +75,17 @@ def json_object(text: str) -> dict:
     return value
 
 
+def closed_loop_fields(changes: dict) -> dict:
+    """Every field of the closed loop's watch (`shelf_env.robot.DragWatch`) with ``changes`` made:
+    what a folder's ``conditions.json`` records, so that a later change of the defaults cannot
+    resume a folder under another watch."""
+    from shelf_env.robot import DragWatch
+
+    watch = DragWatch.from_any(changes)
+    assert watch is not None  # a dict always gives a watch
+    return dataclasses.asdict(watch)
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="shelf-evaluate", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -91,7 +103,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "(and, for checkpoints, from the same file) instead of running them again")
     p.add_argument("--perception-noise", type=json_object, default=None, metavar="JSON",
                    help='evaluate under perception noise, e.g. \'{"dropout": 0.1, "class_flip": 0.05}\'')
-    p.add_argument("--closed-loop", action="store_true", help="evaluate with closed-loop primitives")
+    p.add_argument("--closed-loop", nargs="?", const={}, type=json_object, default=None, metavar="JSON",
+                   help="evaluate with closed-loop primitives (shelf_env.robot.DragWatch); an optional JSON "
+                        'object changes the watch\'s fields, e.g. \'{"sustain": 2, "threshold": 0.5}\'')
     p.add_argument("--safe-picks", action="store_true",
                    help="evaluate with the env's safe_picks: every policy picks only objects whose carry out "
                         "of the opening clears the other visible objects (shelf_env.clearance)")
@@ -243,7 +257,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError("--ray-address needs --backend ray")
         conditions = ev.check_conditions(
             {**({"perception_noise": args.perception_noise} if args.perception_noise is not None else {}),
-             **({"closed_loop": True} if args.closed_loop else {}),
+             **({"closed_loop": closed_loop_fields(args.closed_loop)} if args.closed_loop is not None else {}),
              **({"safe_picks": True} if args.safe_picks else {}),
              **({"physics": args.physics} if args.physics is not None else {})})
         check_out_conditions(args.out, conditions)
