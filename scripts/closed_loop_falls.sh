@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Issue 13's fall table: H-a and H-d (and the shipped P+S model when it exists) on N = 3..14 YCB,
 # 30 runs x 3 seeds (issue 10's grid), open loop vs closed loop, the same scenes. Resumable; extra
-# arguments go to shelf-evaluate. The open-loop cells are the same episodes as issue 10's
-# evaluation (scripts/evaluate_models.sh, results/models): a cell depends only on (policy, N, seed,
-# runs), so those already there are copied (--reuse-cells) instead of run again.
+# arguments go to shelf-evaluate. The open-loop cells are those of issue 10's evaluation
+# (scripts/evaluate_models.sh, results/models), copied (--reuse-cells) instead of run again: the
+# same scenes, but played on other machines (PyBullet differs by CPU; see the README), so compare
+# with care or delete results/closed_loop/off/cells to run them here. scripts/closed_loop_seed0.sh
+# is the two-core version (seed 0, N = 3, 5, 8, 11, 14, everything on one machine).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null

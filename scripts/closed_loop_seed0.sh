@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# Issue 13's fall table on two cores: H-a and H-d on seed 0's YCB scenes of issue 10's grid at
+# N = 3, 5, 8, 11, 14 (30 runs each), and the shipped P+S model at N = 5, 8, 11 (PS=0 leaves it
+# out), open loop vs closed loop, both run here so that every compared episode comes from one
+# machine. Resumable; extra arguments go to shelf-evaluate.
+#   bash scripts/closed_loop_seed0.sh --workers 2                       # the watch's defaults -> on/
+#   WATCH='{"sustain": 2}' NAME=on_s2 bash scripts/closed_loop_seed0.sh  # a variant -> on_s2/
+# (on_s2 and on_s2in were run with PS=0.)
+# scripts/closed_loop_falls.sh is the full grid (N = 3..14, 3 seeds).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh >/dev/null
+. .venv/bin/activate
+name=${NAME:-on}
+watch=${WATCH:-"{}"}
+for out in off "$name"; do
+  loop=()
+  [ "$out" = off ] || loop=(--closed-loop "$watch")
+  shelf-evaluate --policies h-a h-d --ns 3,5,8,11,14 --runs 30 --seeds 1 --object-sets ycb "${loop[@]}" \
+      --out "results/closed_loop_seed0/$out" "$@"
+  policies=(h-a h-d)
+  # the shipped P+S model where it exists (N = 5, 8, 11: an episode of it costs ~4x a heuristic's)
+  if [ "${PS:-1}" = 1 ] && [ -f examples/pretrained/p_s.zip ]; then
+    shelf-evaluate --policies examples/pretrained/p_s.zip --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb \
+        "${loop[@]}" --out "results/closed_loop_seed0/$out" "$@"
+    policies+=(examples/pretrained/p_s.zip)
+  fi
+  # one summary (results.json, results.csv) of every cell in the folder
+  shelf-evaluate --policies "${policies[@]}" --ns 3,5,8,11,14 --runs 30 --seeds 1 --object-sets ycb \
+      "${loop[@]}" --out "results/closed_loop_seed0/$out" --summarize-only
+done
+for metric in fell_rate sr; do
+  python examples/plot_conditions.py --metric $metric --x n --runs results/closed_loop_seed0/off:off \
+      "results/closed_loop_seed0/$name:$name" --out "results/closed_loop_seed0/${name}_${metric}.png"
+done

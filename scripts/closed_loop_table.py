@@ -1,0 +1,71 @@
+"""Issue 13's fall table from shelf-evaluate folders: per policy and N, sorted episodes and episodes
+with a fall in each folder, and the change of falls over N = 8..14 and of sorted episodes over
+N = 3..5 against the first folder (the open loop).
+
+    python scripts/closed_loop_table.py results/closed_loop_seed0/off results/closed_loop_seed0/on \\
+        --out results/closed_loop_seed0/table.md
+
+Each folder's watch (its ``conditions.json``) is printed under the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+from collections import Counter
+
+from shelf_env import evaluation as ev
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("folders", nargs="+", type=pathlib.Path, help="the open loop first")
+    parser.add_argument("--out", type=pathlib.Path, default=None)
+    args = parser.parse_args(argv)
+    try:
+        records = {f: ev.load_cells(f) for f in args.folders}
+    except ValueError as err:
+        print(f"closed_loop_table: error: {err}", file=sys.stderr)
+        return 2
+    sorted_, fell, runs = Counter(), Counter(), Counter()
+    for folder, recs in records.items():
+        for r in recs:
+            key = (folder.name, r.policy, r.num_objects)
+            runs[key] += 1
+            sorted_[key] += r.success
+            fell[key] += r.fell
+    policies = sorted({r.policy for recs in records.values() for r in recs})
+    ns = sorted({r.num_objects for recs in records.values() for r in recs})
+    names = [f.name for f in args.folders]
+    lines = ["Sorted / episodes with a fall, of the runs per cell; the last two columns compare each folder "
+             f"with `{names[0]}`.", "",
+             "| folder | policy | " + " | ".join(f"N = {n}" for n in ns) + " | falls N = 8..14 | sorted N = 3..5 |",
+             "|---|---|" + "---|" * (len(ns) + 2)]
+    for name in names:
+        for policy in policies:
+            if not any(runs[(name, policy, n)] for n in ns):
+                continue  # not evaluated in this folder
+            cells = [f"{sorted_[(name, policy, n)]} / {fell[(name, policy, n)]}" if runs[(name, policy, n)] else "-"
+                     for n in ns]
+            falls = sum(fell[(name, policy, n)] for n in ns if 8 <= n <= 14)
+            base_falls = sum(fell[(names[0], policy, n)] for n in ns if 8 <= n <= 14)
+            won = sum(sorted_[(name, policy, n)] for n in ns if 3 <= n <= 5)
+            base_won = sum(sorted_[(names[0], policy, n)] for n in ns if 3 <= n <= 5)
+            change = f"{falls} ({100 * (falls - base_falls) / base_falls:+.0f} %)" if base_falls else str(falls)
+            lines.append(f"| {name} | {policy} | " + " | ".join(cells) + f" | {change} | {won} ({won - base_won:+d}) |")
+    lines += ["", "Watches (`conditions.json`):", ""]
+    for folder in args.folders:
+        path = folder / "conditions.json"
+        conditions = json.loads(path.read_text()) if path.exists() else {}
+        lines.append(f"- `{folder.name}`: {json.dumps(conditions.get('closed_loop', 'open loop'))}")
+    text = "\n".join(lines) + "\n"
+    print(text, end="")
+    if args.out is not None:
+        args.out.write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
