@@ -15,7 +15,10 @@ phases of each action, which the evaluation's records do not:
 
 For every object that left the cabinet it reports the phase after which it was first outside and
 whether it was the object in the cup (a neighbour dragged out by the pick's carry is the case of
-§V-d and of issue 13's closed loop). It writes ``<folder>/traces.jsonl`` (one line per replayed
+§V-d and of issue 13's closed loop). Within a pick it also names the motion (``motion``):
+``approach`` (in and down to the object), ``lift``, ``retreat`` (the carry out of the opening) or,
+with the closed loop (`shelf_env.robot.DragWatch`), ``put down`` (its reaction: the object carried
+back and put down); ``falls.md`` counts those too. It writes ``<folder>/traces.jsonl`` (one line per replayed
 episode) and ``<folder>/falls.md`` (counts per policy and N), and says when a replay does not
 reproduce its record (it would mean the episode was not history-free).
 """
@@ -36,6 +39,8 @@ from shelf_env import evaluation as ev
 
 #: The phases a fall is attributed to, in the order they happen within an action.
 PHASES = ("pick", "place", "push", "settle")
+#: The motions of a pick a fall is attributed to (``motion``), in the order they happen.
+PICK_MOTIONS = ("approach", "lift", "retreat", "put down")
 
 
 def _outside(world: Any) -> set[int]:
@@ -58,8 +63,26 @@ class PhaseWatch:
         self.world = base.world
         self.runner = base.primitive_runner
         self.first_out: dict[int, str] = {}
+        self.first_motion: dict[int, str] = {}
         self.held: int | None = None
         pick, place, push = self.runner.pick, self.runner.place, self.runner.push
+        watched_move, put_down = self.runner._watched_move, self.runner._put_down_here
+        moving = [""]
+
+        def watched(start: Any, end: Any, speed: float, phase: str) -> Any:
+            self._note_motion("approach" if phase == "lift" else "lift")  # what happened before this move
+            moving[0] = phase
+            caught = watched_move(start, end, speed, phase)
+            self._note_motion(phase)
+            return caught
+
+        def watched_put_down(*args: Any, **kwargs: Any) -> Any:
+            self._note_motion(moving[0])  # out before the catch: the move that was caught
+            result = put_down(*args, **kwargs)
+            self._note_motion("put down")
+            return result
+
+        self.runner._watched_move, self.runner._put_down_here = watched, watched_put_down
 
         def watched_pick(*args: Any, **kwargs: Any) -> Any:
             grasp = pick(*args, **kwargs)
@@ -83,15 +106,25 @@ class PhaseWatch:
         for uid in _outside(self.world) - {exclude}:
             self.first_out.setdefault(uid, phase)
 
+    def _note_motion(self, motion: str) -> None:
+        held = self.runner.robot.held[0] if self.runner.robot.held else None
+        for uid in _outside(self.world) - {held}:
+            self.first_motion.setdefault(uid, motion)
+
     def begin_action(self) -> None:
-        self.first_out, self.held = {}, None
+        self.first_out, self.first_motion, self.held = {}, {}, None
 
     def end_action(self, uids_before: set[int]) -> list[dict[str, Any]]:
         """The objects that left the cabinet during the action just taken (the env removes them
         when it judges the step, so they are those of ``uids_before`` no longer in the world)."""
         gone = uids_before - {o.uid for o in self.world.objects}
-        return [{"uid": uid, "phase": self.first_out.get(uid, "settle"), "held": uid == self.held}
-                for uid in sorted(gone)]
+        fell: list[dict[str, Any]] = []
+        for uid in sorted(gone):
+            phase = self.first_out.get(uid, "settle")
+            fell.append({"uid": uid, "phase": phase, "held": uid == self.held})
+            if phase == "pick":  # not seen after any watched move: a pick that found nothing to grip
+                fell[-1]["motion"] = self.first_motion.get(uid, "approach")
+        return fell
 
 
 class FallTrace(gym.Wrapper):
@@ -159,6 +192,22 @@ def falls_table(traces: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def motions_table(traces: list[dict[str, Any]]) -> str:
+    """Markdown: objects that left the cabinet during a pick, per (policy, N), by the pick's motion
+    (`PICK_MOTIONS`); traces written before the field existed count as ``unrecorded``."""
+    counts: Counter = Counter()
+    for t in traces:
+        for step in t["steps"]:
+            for f in step["fell"]:
+                if f["phase"] == "pick":
+                    counts[(t["policy"], t["num_objects"], f.get("motion", "unrecorded"))] += 1
+    motions = [m for m in (*PICK_MOTIONS, "unrecorded") if any(k[2] == m for k in counts)]
+    keys = sorted({(p, n) for p, n, _ in counts})
+    lines = ["| policy | N | " + " | ".join(motions) + " |", "|---|---|" + "---|" * len(motions)]
+    lines += [f"| {p} | {n} | " + " | ".join(str(counts.get((p, n, m), 0)) for m in motions) + " |" for p, n in keys]
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m shelf_env.traces", description=__doc__.split("\n\n")[0])
     parser.add_argument("folder", type=pathlib.Path, help="a shelf-evaluate --out folder (its cells are replayed)")
@@ -197,9 +246,12 @@ def main(argv: list[str] | None = None) -> int:
                      lambda tmp: tmp.write_text("".join(json.dumps(t) + "\n" for t in traces)))
     command = " ".join(["python -m shelf_env.traces", *(sys.argv[1:] if argv is None else argv)])
     table = falls_table(traces)
+    motions = motions_table(traces)
     write_atomically(args.folder / "falls.md",
-                     lambda tmp: tmp.write_text(f"Objects that left the cabinet, by phase (`{command}`):\n\n{table}"))
+                     lambda tmp: tmp.write_text(f"Objects that left the cabinet, by phase (`{command}`):\n\n{table}"
+                                                f"\nThose that left during a pick, by its motion:\n\n{motions}"))
     print(table, end="")
+    print(motions, end="")
     if mismatches:
         print(f"warning: {mismatches} replays did not reproduce their records", file=sys.stderr)
     return 0

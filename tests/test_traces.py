@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import gymnasium as gym
+import pybullet as pb
 import pytest
 
 from shelf_env import evaluation as ev
@@ -36,9 +37,40 @@ def watched_pick(scene):
 
 def test_a_neighbour_dragged_out_by_the_pick_is_traced_to_the_pick():
     info, fell, front = watched_pick(DRAG_SCENE)
-    assert info["fell"] and fell == [{"uid": front, "phase": "pick", "held": False}]
+    assert info["fell"] and fell == [{"uid": front, "phase": "pick", "held": False, "motion": "retreat"}]
     info, fell, _ = watched_pick(CLEAN_SCENE)
     assert not info["fell"] and fell == []
+
+
+def test_a_fall_during_the_closed_loops_put_down_is_traced_to_it():
+    # the closed loop catches the crafted drag and carries the box back; a put-down that then
+    # knocks the neighbour out (here: moved out by hand, as a fall in that motion would) is named
+    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=True)
+    try:
+        env.reset(seed=0)
+        env.unwrapped.set_scene(DRAG_SCENE, REGIONS)
+        runner, world = env.unwrapped.primitive_runner, env.unwrapped.world
+        front = world.objects[int(world.positions()[:, 0].argmin())].uid
+        put_down = runner._put_down_here
+
+        def knocking_put_down(*args, **kwargs):
+            put_down(*args, **kwargs)
+            pb.resetBasePositionAndOrientation(front, (-0.15, 0.0, 0.05), (0, 0, 0, 1),
+                                               physicsClientId=env.unwrapped.client)
+
+        runner._put_down_here = knocking_put_down
+        watch = traces.PhaseWatch(env)
+        before = {o.uid for o in world.objects}
+        watch.begin_action()
+        _, _, _, _, info = env.step(env.unwrapped.codec.action_at("pick", 0.30, 0.0))
+        fell = watch.end_action(before)
+    finally:
+        env.close()
+    assert info["interventions"] and info["fell"]
+    assert fell == [{"uid": front, "phase": "pick", "held": False, "motion": "put down"}]
+    table = traces.motions_table([{"policy": "h-d", "num_objects": 2, "steps": [{"fell": fell}]},
+                                  {"policy": "h-d", "num_objects": 2, "steps": [{"fell": [{"phase": "pick"}]}]}])
+    assert table == "| policy | N | put down | unrecorded |\n|---|---|---|---|\n| h-d | 2 | 1 | 1 |\n"
 
 
 def test_replayed_fall_reproduces_its_record_and_is_tabled(tmp_path, capsys):
