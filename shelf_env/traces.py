@@ -18,9 +18,9 @@ whether it was the object in the cup (a neighbour dragged out by the pick's carr
 §V-d and of issue 13's closed loop). Within a pick it also names the motion (``motion``):
 ``approach`` (in and down to the object), ``lift``, ``retreat`` (the carry out of the opening) or,
 with the closed loop (`shelf_env.robot.DragWatch`), ``put down`` (its reaction: the object carried
-back and put down); ``falls.md`` counts those too. It writes ``<folder>/traces.jsonl`` (one line per replayed
-episode) and ``<folder>/falls.md`` (counts per policy and N), and says when a replay does not
-reproduce its record (it would mean the episode was not history-free).
+back and put down). It writes ``<folder>/traces.jsonl`` (one line per replayed episode) and
+``<folder>/falls.md`` (counts per policy and N, by phase and by pick motion), and says when a
+replay does not reproduce its record (it would mean the episode was not history-free).
 """
 
 from __future__ import annotations
