@@ -16,6 +16,7 @@ import pathlib
 import sys
 from collections import Counter
 
+from sb3_pixeldqn.files import write_text_atomically
 from shelf_env import evaluation as ev
 
 
@@ -63,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     text = "\n".join(lines) + "\n"
     print(text, end="")
     if args.out is not None:
-        args.out.write_text(text)
+        write_text_atomically(args.out, text)
     return 0
 
 

@@ -102,6 +102,7 @@ class ShelfSortEnv(gym.Env):
     robot: Robot
     primitive_runner: Primitives
     camera: HeightmapCamera
+    watch_camera: HeightmapCamera | None
     codec: ActionCodec
     rows: int
     cols: int
@@ -164,15 +165,14 @@ class ShelfSortEnv(gym.Env):
         #: How much is simulated (`shelf_env.world.Physics`): "fast" (default) or "reference".
         self.physics = Physics.named(physics)
         self.client = pb.connect(pb.DIRECT)
+        cfg = camera or CameraConfig()
+        #: The closed loop's small camera (the same pose, a quarter of the resolution; None: open loop);
+        #: `_build_world` gives it the world's bodies and hands it to the primitives.
+        self.watch_camera = None if self.drag_watch is None else HeightmapCamera(
+            self.client, dataclasses.replace(cfg, width=cfg.width // 4, height=cfg.height // 4), pixel_size)
         self._build_world()
         self.camera = HeightmapCamera(self.client, camera, pixel_size, hidden_bodies=self.world.decorative,
                                       wall_uids=self.world.wall_uids)
-        #: The closed loop's small camera (the same pose, a quarter of the resolution; None: open loop).
-        self.watch_camera = None if self.drag_watch is None else HeightmapCamera(
-            self.client, dataclasses.replace(self.camera.cfg, width=self.camera.cfg.width // 4,
-                                             height=self.camera.cfg.height // 4),
-            pixel_size, hidden_bodies=self.world.decorative, wall_uids=self.world.wall_uids)
-        self.primitive_runner.look = None if self.watch_camera is None else self.watch_camera.front_edges
         #: The action codec (`shelf_env.actions`): index <-> (map, row, col) <-> cabinet (x, y).
         self.codec = ActionCodec(tuple(self.map_names), self.camera.rows, self.camera.cols, pixel_size)
         self.rows, self.cols = self.codec.rows, self.codec.cols
@@ -227,10 +227,9 @@ class ShelfSortEnv(gym.Env):
         pb.resetSimulation(physicsClientId=self.client)
         self.world = World(self.client, sleeping=self.sleeping, physics=self.physics)
         self.robot = Robot(self.client, skip_free_motion=self.physics.skip_free_motion)
-        watch_camera = getattr(self, "watch_camera", None)
         self.primitive_runner = Primitives(self.robot, watch=self.drag_watch,
-                                           look=None if watch_camera is None else watch_camera.front_edges)
-        for camera in (getattr(self, "camera", None), watch_camera):
+                                           look=None if self.watch_camera is None else self.watch_camera.front_edges)
+        for camera in (getattr(self, "camera", None), self.watch_camera):
             if camera is not None:  # same bodies in the same order: same ids, but say so rather than assume
                 camera.hidden_bodies = self.world.decorative
                 camera.wall_uids = np.asarray(self.world.wall_uids, dtype=np.int64)

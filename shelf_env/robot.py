@@ -581,14 +581,18 @@ class Primitives:
             event.update(signal="camera", object=int(uid), shift_m=round(float(shift), 4))
         else:
             event.update(signal="force", force_n=round(peak[0], 3))
+        event["reaction"] = f"carried back {self._put_down_here(start):.3f} m, put down"
         self.interventions.append(event)
-        self._put_down_here(start)
         return True
 
-    def _put_down_here(self, start: np.ndarray) -> None:
+    def _put_down_here(self, start: np.ndarray) -> float:
         """Carry the held object back ``back_off`` along the path it came (from ``start``, free a
         moment ago: off whatever it pressed on), lower it straight down until it rests on something,
-        release it, lift the cup to carry height and go home."""
+        release it, lift the cup to carry height and go home. Returns how far it was carried back.
+
+        Not `_lower_and_release` with another landing rule: its lift and exit start from other
+        (equal up to float noise) points, and the committed closed-loop results reproduce bit for
+        bit only along this path."""
         r, m = self.robot, self.robot.motion
         assert r.held is not None and self.watch is not None
         obj = r.held[0]
@@ -600,7 +604,6 @@ class Primitives:
         if np.linalg.norm(way_back) > 1e-6:
             r.move_linear(here, here + way_back, m.approach_speed / 2)
             here = here + way_back
-        self.interventions[-1]["reaction"] = f"carried back {float(np.linalg.norm(way_back)):.3f} m, put down"
         hang = here[2] - pb.getAABB(obj, physicsClientId=r.client)[0][2]
         low = np.array([here[0], here[1], min(max(hang + m.release_gap, 0.0), here[2])])
 
@@ -616,6 +619,7 @@ class Primitives:
         r.move_linear(here, top, m.vertical_speed)
         r.move_linear(top, np.array([min(m.outside_x, top[0]), top[1], top[2]]), m.approach_speed)
         r.go_home()
+        return float(np.linalg.norm(way_back))
 
     def place(self, grasp: Grasp, x: float, y: float) -> None:
         """Carry the held object of ``grasp`` in front of (x, y), in at carry height, lower it

@@ -54,9 +54,10 @@ def test_a_fall_during_the_closed_loops_put_down_is_traced_to_it():
         put_down = runner._put_down_here
 
         def knocking_put_down(*args, **kwargs):
-            put_down(*args, **kwargs)
+            carried = put_down(*args, **kwargs)
             pb.resetBasePositionAndOrientation(front, (-0.15, 0.0, 0.05), (0, 0, 0, 1),
                                                physicsClientId=env.unwrapped.client)
+            return carried
 
         runner._put_down_here = knocking_put_down
         watch = traces.PhaseWatch(env)
