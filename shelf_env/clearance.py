@@ -53,3 +53,44 @@ def carry_clear(labels: np.ndarray, height: np.ndarray, pixel_size: float = para
         # gripped at a cell of height h, the object's bottom is z_carry - h during the carry
         clear |= own & (height + tallest < z_carry - tolerance)
     return clear
+
+
+def carry_path(labels: np.ndarray, height: np.ndarray, row: int, col: int,
+               pixel_size: float = params.PIXEL_SIZE, z_carry: float = Z_CARRY, side: float = SIDE_M,
+               tolerance: float = TOLERANCE_M, max_shift: float = 0.2) -> int | None:
+    """The nearest clear way out for the object picked at cell (``row``, ``col``): the lateral shift
+    in cells (0: straight out, as `carry_clear`; > 0 towards larger columns) of a carry that first
+    moves the object sideways at carry height and then straight out of the opening, with every
+    other visible object in both swept corridors lower than the object's bottom; None when no
+    shift up to ``max_shift`` m is clear. An empty cell (``labels`` < 0) gives 0: nothing is known
+    about what the cup will hold, so the carry goes straight as without the check.
+
+    The sideways corridor is the object's own rows, over the columns between its place and the
+    shifted one, widened by ``side``; the way out is as in `carry_clear`, at the shifted columns.
+    A shifted object keeps ``side`` + one cell from the side walls (the map's edges); the straight
+    carry is judged wherever the object is.
+    """
+    labels, height = np.asarray(labels), np.asarray(height, dtype=float)
+    if labels.shape != height.shape or labels.ndim != 2:
+        raise ValueError(f"labels and height must be (H, W) maps of one shape, got {labels.shape} and {height.shape}")
+    rows, cols = labels.shape
+    if not (0 <= row < rows and 0 <= col < cols):
+        raise ValueError(f"cell ({row}, {col}) is outside the {rows}x{cols} map")
+    uid = labels[row, col]
+    if uid < 0:
+        return 0
+    side_cells = int(round(side / pixel_size))
+    rr, cc = np.nonzero(labels == uid)
+    r0, r1, c0, c1 = int(rr.min()), int(rr.max()), int(cc.min()), int(cc.max())
+    obstacle = np.where((labels >= 0) & (labels != uid), height, 0.0)
+    bottom = z_carry - float(height[row, col]) - tolerance  # the object's bottom during the carry
+    reach = int(round(max_shift / pixel_size))
+    for shift in sorted(range(-reach, reach + 1), key=lambda s: (abs(s), s)):
+        lo, hi = c0 + shift - side_cells, c1 + shift + side_cells
+        if shift and (lo < 1 or hi > cols - 2):
+            continue
+        sideways = obstacle[r0:r1 + 1, max(min(c0, c0 + shift) - side_cells, 0):max(c1, c1 + shift) + side_cells + 1]
+        way_out = obstacle[r0:, max(lo, 0):hi + 1]
+        if max(sideways.max(initial=0.0), way_out.max(initial=0.0)) < bottom:
+            return shift
+    return None

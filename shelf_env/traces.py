@@ -40,7 +40,7 @@ from shelf_env import evaluation as ev
 #: The phases a fall is attributed to, in the order they happen within an action.
 PHASES = ("pick", "place", "push", "settle")
 #: The motions of a pick a fall is attributed to (``motion``), in the order they happen.
-PICK_MOTIONS = ("approach", "lift", "retreat", "put down")
+PICK_MOTIONS = ("approach", "lift", "detour", "retreat", "put down")
 
 
 def _outside(world: Any) -> set[int]:

@@ -8,7 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from shelf_env.clearance import Z_CARRY, carry_clear
+from shelf_env.clearance import Z_CARRY, carry_clear, carry_path
 from shelf_env.evaluation import check_conditions
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
 from shelf_env.world import Region
@@ -58,6 +58,55 @@ def test_the_held_objects_hang_is_its_pick_cells_height():
 def test_carry_clear_rejects_maps_of_different_shapes():
     with pytest.raises(ValueError, match="one shape"):
         carry_clear(np.zeros((80, 120), int), np.zeros((80, 119)))
+
+
+def test_carry_path_is_straight_exactly_where_carry_clear_says_so():
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        objects = []
+        for _ in range(8):
+            r, c, h, w = rng.integers(0, 72), rng.integers(0, 110), rng.integers(4, 10), rng.integers(4, 10)
+            objects.append((r, r + h, c, c + w, rng.uniform(0.03, 0.17)))
+        labels, height = heightmap(*objects)
+        clear = carry_clear(labels, height)
+        rows, cols = np.nonzero(labels >= 0)
+        for k in rng.choice(len(rows), 10):
+            r, c = rows[k], cols[k]
+            assert (carry_path(labels, height, r, c, max_shift=0.0) == 0) == clear[r, c]
+            path = carry_path(labels, height, r, c)
+            assert (path == 0) == clear[r, c]  # straight out whenever that is clear, and only then
+
+
+def test_carry_path_takes_the_nearest_clear_shift_with_a_clear_sideways_carry():
+    # a 12 cm object behind an 8 cm one: straight out it sweeps the front one (as carry_clear says)
+    back, front = (10, 20, 50, 60, 0.12), (60, 70, 50, 60, 0.08)
+    labels, height = heightmap(back, front)
+    # 11 cells (5.5 cm) either way clears the front one and its 1-cell margin; the -y.. side first on a tie
+    assert carry_path(labels, height, 15, 55) == -11
+    # an 8 cm object beside it on that side: the sideways carry would sweep it, so the other side
+    labels, height = heightmap(back, front, (10, 20, 30, 40, 0.08))
+    assert carry_path(labels, height, 15, 55) == 11
+    # and one more in front on that side (columns 66..75): the first way out past it
+    labels, height = heightmap(back, front, (10, 20, 30, 40, 0.08), (60, 70, 66, 76, 0.08))
+    assert carry_path(labels, height, 15, 55) == 27  # columns 76..85 with the margin: 49 + 27 = 76
+    # not within reach: None
+    assert carry_path(labels, height, 15, 55, max_shift=0.1) is None
+    # a short neighbour beside it is no obstacle to the sideways carry (0.04 < 0.185 - 0.12 - 0.005)
+    labels, height = heightmap(back, front, (10, 20, 30, 40, 0.04))
+    assert carry_path(labels, height, 15, 55) == -11
+
+
+def test_carry_path_keeps_a_shifted_object_off_the_walls_and_knows_nothing_of_empty_cells():
+    # against the wall at column 0 with a tall one in front: only shifts towards the middle
+    labels, height = heightmap((10, 20, 0, 10, 0.12), (60, 70, 0, 10, 0.08))
+    assert carry_path(labels, height, 15, 5) == 11
+    labels, height = heightmap((10, 20, 0, 10, 0.12))
+    assert carry_path(labels, height, 15, 5) == 0  # straight out is judged wherever the object is
+    assert carry_path(labels, height, 40, 60) == 0  # an empty cell: nothing known, straight
+    with pytest.raises(ValueError, match=r"cell \(80, 0\) is outside the 80x120 map"):
+        carry_path(labels, height, 80, 0)
+    with pytest.raises(ValueError, match="one shape"):
+        carry_path(labels, height[:, 1:], 15, 5)
 
 
 def scene_env(scene, regions=REGIONS, **kwargs):

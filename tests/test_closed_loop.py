@@ -40,7 +40,8 @@ def test_open_loop_retract_drags_the_neighbour_out():
 
 
 def test_closed_loop_catches_the_drag_and_puts_the_object_down():
-    reward, terminated, info, positions = pick_back_box(DRAG_SCENE, closed_loop=True)
+    # the watches alone (no lane check, which would not let the drag start)
+    reward, terminated, info, positions = pick_back_box(DRAG_SCENE, closed_loop={"lane": False})
     assert not info["fell"] and reward == -1 and not terminated
     (event,) = info["interventions"]
     assert event["primitive"] == "pick" and event["phase"] == "retreat" and event["signal"] == "force"
@@ -53,7 +54,7 @@ def test_closed_loop_catches_the_drag_and_puts_the_object_down():
 
 
 def test_a_short_back_off_puts_the_object_down_where_it_was_caught():
-    reward, terminated, info, positions = pick_back_box(DRAG_SCENE, closed_loop=DragWatch(back_off=0.02))
+    reward, terminated, info, positions = pick_back_box(DRAG_SCENE, closed_loop=DragWatch(back_off=0.02, lane=False))
     assert not info["fell"] and not terminated
     (event,) = info["interventions"]
     assert event["reaction"] == "carried back 0.020 m, put down"
@@ -65,7 +66,7 @@ def test_a_short_back_off_puts_the_object_down_where_it_was_caught():
 def test_the_camera_check_sees_the_dragged_neighbour_come_towards_the_opening():
     # force sensor off: only the camera watches; the neighbour is hidden under the carried box for
     # most of the drag, so the camera sees it late (and it still falls), but it names the right object
-    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=DragWatch(force=False)).unwrapped
+    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=DragWatch(force=False, lane=False)).unwrapped
     try:
         env.reset(seed=0)
         env.set_scene(DRAG_SCENE, REGIONS)
@@ -112,6 +113,9 @@ def test_closed_loop_leaves_a_clean_pick_alone():
     ({"camera_every": 1.5}, "DragWatch.camera_every must be an integer >= 0"),
     ({"speed_scale": 0}, r"DragWatch.speed_scale must be in \(0, 1\]"),
     ({"force": 1}, "DragWatch.force must be True or False"),
+    ({"lane": "yes"}, "DragWatch.lane must be True or False"),
+    ({"detour_max": -0.1}, "DragWatch.detour_max must be a finite number >= 0"),
+    ({"blocked": "drop"}, r"DragWatch.blocked must be one of \('carry', 'put back'\), got 'drop'"),
 ])
 def test_bad_watch_fields_are_named(fields, message):
     with pytest.raises(ValueError, match=message):
@@ -142,3 +146,36 @@ def test_speed_scale_slows_the_watched_retreat():
             env.close()
     retreat = 0.40 / (0.25 * 1 / 240)  # physics steps of the retreat at full speed (TIME_STEP 1/240 s)
     assert steps[0.5] - steps[1.0] == pytest.approx(retreat, rel=0.25)
+
+
+def test_the_lane_check_carries_the_object_out_beside_the_neighbour_it_would_drag():
+    # DRAG_SCENE: the 14 cm box hangs 4.5 cm above the floor under the cup, the 10 cm box in front
+    # is in its way (open loop it is dragged out); the lane check shifts the carry sideways first
+    reward, terminated, info, positions = pick_back_box(DRAG_SCENE, closed_loop=True)  # the defaults
+    assert not info["fell"] and not terminated
+    (event,) = info["interventions"]
+    assert event["phase"] == "lane" and event["signal"] == "lane"
+    shift = float(event["reaction"].removeprefix("carried ").removesuffix(" m sideways, then out"))
+    assert 0.05 < abs(shift) < 0.08  # half the two 5 cm widths, their margins and the cell grid
+    assert positions[1] == pytest.approx([0.06, 0.0, 0.05], abs=0.003)  # the front box untouched
+    assert positions[0, 0] != pytest.approx(0.30, abs=0.01)  # the back box was carried out and placed
+
+
+def test_the_lane_check_puts_the_object_back_when_no_way_out_is_clear():
+    watch = {"detour_max": 0.0}  # blocked="put back" is the default
+    reward, terminated, info, positions = pick_back_box(DRAG_SCENE, closed_loop=watch)
+    assert not info["fell"] and not terminated
+    (event,) = info["interventions"]
+    assert event["phase"] == "lane" and event["reaction"] == "no clear way out: put back where picked"
+    assert positions[0] == pytest.approx([0.30, 0.0, 0.07], abs=0.005)  # back where it was picked
+    assert positions[1] == pytest.approx([0.06, 0.0, 0.05], abs=0.003)
+    # blocked="carry" carries it straight out, and the force watch catches the drag
+    _, _, info, _ = pick_back_box(DRAG_SCENE, closed_loop={"blocked": "carry", "detour_max": 0.0})
+    assert [e["signal"] for e in info["interventions"]] == ["force"]
+
+
+def test_the_watches_without_the_lane_check_leave_a_clean_pick_alone_too():
+    open_loop = pick_back_box(CLEAN_SCENE, closed_loop=False, physics="reference")
+    closed = pick_back_box(CLEAN_SCENE, closed_loop={"lane": False}, physics="reference")
+    assert closed[2]["interventions"] == [] and closed[0] == open_loop[0]
+    assert closed[3] == pytest.approx(open_loop[3], abs=1e-6)

@@ -45,7 +45,7 @@ def test_a_neighbour_dragged_out_by_the_pick_is_traced_to_the_pick():
 def test_a_fall_during_the_closed_loops_put_down_is_traced_to_it():
     # the closed loop catches the crafted drag and carries the box back; a put-down that then
     # knocks the neighbour out (here: moved out by hand, as a fall in that motion would) is named
-    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=True)
+    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop={"lane": False})
     try:
         env.reset(seed=0)
         env.unwrapped.set_scene(DRAG_SCENE, REGIONS)
@@ -113,3 +113,33 @@ def test_episodes_are_replayed_under_the_folders_conditions(tmp_path, monkeypatc
     assert seen == [{"safe_picks": True}]
     (tmp_path / "conditions.json").write_text(json.dumps({"closed_loop": "yes"}))
     assert traces.main([str(tmp_path), "--policies", "h-d", "--ns", "3"]) == 2  # bad conditions: one line
+
+
+def test_a_fall_during_the_lane_checks_sideways_carry_is_traced_to_the_detour():
+    # the lane check carries the box sideways past the front one; a detour that knocked the front
+    # one out (moved out by hand, as in the test above) is named
+    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=True)
+    try:
+        env.reset(seed=0)
+        env.unwrapped.set_scene(DRAG_SCENE, REGIONS)
+        runner, world = env.unwrapped.primitive_runner, env.unwrapped.world
+        front = world.objects[int(world.positions()[:, 0].argmin())].uid
+        watched_move = runner._watched_move
+
+        def knocking_detour(start, end, speed, phase):
+            caught = watched_move(start, end, speed, phase)
+            if phase == "detour":
+                pb.resetBasePositionAndOrientation(front, (-0.15, 0.0, 0.05), (0, 0, 0, 1),
+                                                   physicsClientId=env.unwrapped.client)
+            return caught
+
+        runner._watched_move = knocking_detour
+        watch = traces.PhaseWatch(env)
+        before = {o.uid for o in world.objects}
+        watch.begin_action()
+        _, _, _, _, info = env.step(env.unwrapped.codec.action_at("pick", 0.30, 0.0))
+        fell = watch.end_action(before)
+    finally:
+        env.close()
+    assert [e["phase"] for e in info["interventions"]] == ["lane"] and info["fell"]
+    assert fell == [{"uid": front, "phase": "pick", "held": False, "motion": "detour"}]
