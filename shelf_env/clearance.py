@@ -30,28 +30,56 @@ SIDE_M = 0.005
 TOLERANCE_M = 0.005
 
 
+def _maps(labels: np.ndarray, height: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    labels, height = np.asarray(labels), np.asarray(height, dtype=float)
+    if labels.shape != height.shape or labels.ndim != 2:
+        raise ValueError(f"labels and height must be (H, W) maps of one shape, got {labels.shape} and {height.shape}")
+    return labels, height
+
+
+def _tallest_on_path(obstacle: np.ndarray, box: tuple[int, int, int, int], shift: int, side_cells: int) -> float | None:
+    """The tallest obstacle swept by an object spanning rows ``r0..r1`` and columns ``c0..c1``
+    (``box``) when it is carried ``shift`` columns sideways along its own rows, then straight out
+    to the front row, both corridors widened by ``side_cells``; None when the shift would bring it
+    within ``side_cells`` + 1 of a side wall (the straight carry, shift 0, is judged anywhere)."""
+    r0, r1, c0, c1 = box
+    lo, hi = c0 + shift - side_cells, c1 + shift + side_cells
+    if shift and (lo < 1 or hi > obstacle.shape[1] - 2):
+        return None
+    sideways = obstacle[r0:r1 + 1, max(min(c0, c0 + shift) - side_cells, 0):max(c1, c1 + shift) + side_cells + 1]
+    way_out = obstacle[r0:, max(lo, 0):hi + 1]
+    return max(float(sideways.max(initial=0.0)), float(way_out.max(initial=0.0)))
+
+
+def _object(labels: np.ndarray, height: np.ndarray, uid: int
+            ) -> tuple[np.ndarray, tuple[int, int, int, int], np.ndarray]:
+    """The object's cells, their bounding box (r0, r1, c0, c1) and the others' heights (0 elsewhere)."""
+    own = labels == uid
+    rr, cc = np.nonzero(own)
+    obstacle = np.where((labels >= 0) & ~own, height, 0.0)
+    return own, (int(rr.min()), int(rr.max()), int(cc.min()), int(cc.max())), obstacle
+
+
 def carry_clear(labels: np.ndarray, height: np.ndarray, pixel_size: float = params.PIXEL_SIZE,
-                z_carry: float = Z_CARRY, side: float = SIDE_M, tolerance: float = TOLERANCE_M) -> np.ndarray:
+                z_carry: float = Z_CARRY, side: float = SIDE_M, tolerance: float = TOLERANCE_M,
+                max_shift: float = 0.0) -> np.ndarray:
     """(H, W) bool: the object cells whose pick can be carried out of the opening clear of the others.
 
     ``labels`` (H, W) int: one id per visible object (an object uid, or a blob index), < 0 where no
     object is seen; ``height`` (H, W): the observed surface height in metres. Rows run from the
-    back (row 0) to the front, as in the env's observation.
+    back (row 0) to the front, as in the env's observation. With ``max_shift`` > 0, a carry that
+    first moves the object sideways by up to that many metres (as the closed loop's lane check
+    does, `carry_path`) counts too.
     """
-    labels, height = np.asarray(labels), np.asarray(height, dtype=float)
-    if labels.shape != height.shape or labels.ndim != 2:
-        raise ValueError(f"labels and height must be (H, W) maps of one shape, got {labels.shape} and {height.shape}")
-    rows, cols = labels.shape
-    side_cells = int(round(side / pixel_size))
-    clear = np.zeros((rows, cols), dtype=bool)
+    labels, height = _maps(labels, height)
+    side_cells, reach = int(round(side / pixel_size)), int(round(max_shift / pixel_size))
+    clear = np.zeros(labels.shape, dtype=bool)
     for uid in np.unique(labels[labels >= 0]):
-        own = labels == uid
-        rr, cc = np.nonzero(own)
-        band = (slice(int(rr.min()), rows), slice(max(int(cc.min()) - side_cells, 0), int(cc.max()) + side_cells + 1))
-        others = (labels[band] >= 0) & (labels[band] != uid)
-        tallest = float(height[band][others].max(initial=0.0))
+        own, box, obstacle = _object(labels, height, uid)
+        tops = (_tallest_on_path(obstacle, box, shift, side_cells) for shift in range(-reach, reach + 1))
+        lowest = min(top for top in tops if top is not None)  # the straight carry is always judged
         # gripped at a cell of height h, the object's bottom is z_carry - h during the carry
-        clear |= own & (height + tallest < z_carry - tolerance)
+        clear |= own & (height + lowest < z_carry - tolerance)
     return clear
 
 
@@ -70,27 +98,18 @@ def carry_path(labels: np.ndarray, height: np.ndarray, row: int, col: int,
     A shifted object keeps ``side`` + one cell from the side walls (the map's edges); the straight
     carry is judged wherever the object is.
     """
-    labels, height = np.asarray(labels), np.asarray(height, dtype=float)
-    if labels.shape != height.shape or labels.ndim != 2:
-        raise ValueError(f"labels and height must be (H, W) maps of one shape, got {labels.shape} and {height.shape}")
+    labels, height = _maps(labels, height)
     rows, cols = labels.shape
     if not (0 <= row < rows and 0 <= col < cols):
         raise ValueError(f"cell ({row}, {col}) is outside the {rows}x{cols} map")
     uid = labels[row, col]
     if uid < 0:
         return 0
-    side_cells = int(round(side / pixel_size))
-    rr, cc = np.nonzero(labels == uid)
-    r0, r1, c0, c1 = int(rr.min()), int(rr.max()), int(cc.min()), int(cc.max())
-    obstacle = np.where((labels >= 0) & (labels != uid), height, 0.0)
+    _, box, obstacle = _object(labels, height, uid)
     bottom = z_carry - float(height[row, col]) - tolerance  # the object's bottom during the carry
-    reach = int(round(max_shift / pixel_size))
+    side_cells, reach = int(round(side / pixel_size)), int(round(max_shift / pixel_size))
     for shift in sorted(range(-reach, reach + 1), key=lambda s: (abs(s), s)):
-        lo, hi = c0 + shift - side_cells, c1 + shift + side_cells
-        if shift and (lo < 1 or hi > cols - 2):
-            continue
-        sideways = obstacle[r0:r1 + 1, max(min(c0, c0 + shift) - side_cells, 0):max(c1, c1 + shift) + side_cells + 1]
-        way_out = obstacle[r0:, max(lo, 0):hi + 1]
-        if max(sideways.max(initial=0.0), way_out.max(initial=0.0)) < bottom:
+        top = _tallest_on_path(obstacle, box, shift, side_cells)
+        if top is not None and top < bottom:
             return shift
     return None

@@ -384,6 +384,12 @@ class ShelfSortEnv(gym.Env):
         if grasp is not None:
             self.primitive_runner.place(grasp, *self._place_for(grasp.uid))
 
+    @property
+    def detour_reach(self) -> float:
+        """Metres the closed loop's lane check may carry an object sideways to a clear way out
+        (`DragWatch.detour_max`; 0 without the lane check): what ``safe_picks`` counts as clear."""
+        return self.drag_watch.detour_max if self.drag_watch is not None and self.drag_watch.lane else 0.0
+
     def _carry_shift(self, x: float, y: float) -> float | None:
         """The closed loop's lane check (`DragWatch.lane`) for a pick at (x, y): the sideways shift in
         metres of the nearest carry that clears the neighbours seen in the last observation
@@ -409,7 +415,8 @@ class ShelfSortEnv(gym.Env):
         When no object is visible at all, every action is allowed (the mask has nothing to say).
 
         With ``safe_picks=True`` a pick is allowed only where its object can be carried out of the
-        opening clear of every other visible object (`shelf_env.clearance.carry_clear`), unless no
+        opening clear of every other visible object (`shelf_env.clearance.carry_clear`; with the
+        closed loop's lane check, also by a sideways detour of up to `detour_reach`), unless no
         pick is: then every pick on an object stays allowed (a pick-only policy must act).
         """
         if self._semantic is None:
@@ -423,7 +430,8 @@ class ShelfSortEnv(gym.Env):
         cols = np.arange(self.cols)
         pick = occupied
         if self.safe_picks:
-            clear = carry_clear(*self._semantic, self.camera.pixel_size, z_carry=carry_height(self.robot.motion))
+            clear = carry_clear(*self._semantic, self.camera.pixel_size, z_carry=carry_height(self.robot.motion),
+                                max_shift=self.detour_reach)
             pick = clear if clear.any() else occupied
         masks = {
             "pick": pick,

@@ -80,12 +80,13 @@ class ObservationView:
                 sorted_cells |= cells
         return cls(object_class, blob, regions, graspable, sorted_cells)
 
-    def restrict_to_clear_carries(self, obs: np.ndarray, pixel_size: float) -> None:
+    def restrict_to_clear_carries(self, obs: np.ndarray, pixel_size: float, max_shift: float = 0.0) -> None:
         """Keep only the graspable cells whose carry out of the opening clears the other visible
         objects (`shelf_env.clearance.carry_clear` on the blobs and the height channel), unless no
         unsorted object has one. Blobs are objects as the colours show them: touching objects of
-        one class are one blob, so one of them is not an obstacle to the other."""
-        clear = self.graspable & carry_clear(self.blob, observed_height(obs), pixel_size)
+        one class are one blob, so one of them is not an obstacle to the other. ``max_shift``: the
+        sideways detour the closed loop's lane check may take (`ShelfSortEnv.detour_reach`)."""
+        clear = self.graspable & carry_clear(self.blob, observed_height(obs), pixel_size, max_shift=max_shift)
         if (clear & ~self.sorted_cells).any():
             self.graspable = clear
 
@@ -183,8 +184,10 @@ class PickHeuristic(ObservationPolicy):
         self.rows, self.cols = base.rows, base.cols
         self.pixel_size = base.camera.pixel_size
         self.margin_cells = int(round(CUP_MARGIN_M / self.pixel_size))
-        #: The env's ``safe_picks``: choose only among picks whose carry clears the neighbours.
+        #: The env's ``safe_picks``: choose only among picks whose carry clears the neighbours
+        #: (straight out, or by a sideways detour up to ``detour_reach`` m with the lane check).
         self.safe_picks = bool(getattr(base, "safe_picks", False))
+        self.detour_reach = float(base.detour_reach)
 
     def _pick(self, row: int, col: int) -> int:
         return self.codec.encode("pick", int(row), int(col))
@@ -192,7 +195,7 @@ class PickHeuristic(ObservationPolicy):
     def _act(self, obs: np.ndarray) -> int:
         view = ObservationView.from_observation(obs, self.margin_cells)
         if self.safe_picks:
-            view.restrict_to_clear_carries(obs, self.pixel_size)
+            view.restrict_to_clear_carries(obs, self.pixel_size, self.detour_reach)
         if not view.graspable.any():  # nothing visible: pick the middle of the floor (a no-op probe)
             return self._pick(self.rows // 2, self.cols // 2)
         return self.act_on(view, obs)

@@ -116,6 +116,19 @@ def scene_env(scene, regions=REGIONS, **kwargs):
     return env
 
 
+def test_with_the_lane_check_safe_picks_counts_a_clear_detour_as_clear():
+    # DRAG_SCENE's back box has no clear straight carry but one 5.5 cm to the side
+    for closed_loop, reach, allowed in ((False, 0.0, False), ({"lane": False}, 0.0, False), (True, 0.2, True),
+                                        ({"detour_max": 0.05}, 0.05, False)):
+        env = scene_env(DRAG_SCENE, safe_picks=True, closed_loop=closed_loop)
+        try:
+            assert env.detour_reach == reach
+            assert env.action_masks()[env.codec.action_at("pick", 0.30, 0.0)] == allowed
+            assert DistanceHeuristic(env).detour_reach == reach
+        finally:
+            env.close()
+
+
 def test_safe_picks_mask_leaves_out_the_pick_that_drags_the_neighbour_out():
     env = scene_env(DRAG_SCENE, safe_picks=True)
     try:
