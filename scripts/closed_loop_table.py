@@ -5,7 +5,9 @@ N = 3..5 against the first folder (the open loop).
     python scripts/closed_loop_table.py results/closed_loop_seed0/off results/closed_loop_seed0/on \\
         --out results/closed_loop_seed0/table.md
 
-Each folder's watch (its ``conditions.json``) is printed under the table.
+Each folder's watch (its ``conditions.json``) is printed under the table. ``--policies`` and
+``--seeds`` keep only those records (e.g. a policy evaluated on fewer seeds in one folder than in
+another: compare it on the seeds both have).
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("folders", nargs="+", type=pathlib.Path, help="the open loop first")
     parser.add_argument("--out", type=pathlib.Path, default=None)
+    parser.add_argument("--policies", nargs="+", default=None, help="policy labels to keep (default: all)")
+    parser.add_argument("--seeds", nargs="+", type=int, default=None, help="evaluation seeds to keep (default: all)")
     args = parser.parse_args(argv)
     try:
         records = {f: ev.load_cells(f) for f in args.folders}
@@ -33,15 +37,20 @@ def main(argv: list[str] | None = None) -> int:
     sorted_, fell, runs = Counter(), Counter(), Counter()
     for folder, recs in records.items():
         for r in recs:
+            if (args.policies is not None and r.policy not in args.policies) or \
+                    (args.seeds is not None and r.seed not in args.seeds):
+                continue
             key = (folder.name, r.policy, r.num_objects)
             runs[key] += 1
             sorted_[key] += r.success
             fell[key] += r.fell
-    policies = sorted({r.policy for recs in records.values() for r in recs})
-    ns = sorted({r.num_objects for recs in records.values() for r in recs})
+    policies = sorted({key[1] for key in runs})
+    ns = sorted({key[2] for key in runs})
     names = [f.name for f in args.folders]
+    kept = "".join(f"; {what} {', '.join(map(str, values))} only" for what, values in
+                   (("policies", args.policies), ("seeds", args.seeds)) if values is not None)
     lines = ["Sorted / episodes with a fall, of the runs per cell; the last two columns compare each folder "
-             f"with `{names[0]}`.", "",
+             f"with `{names[0]}`{kept}.", "",
              "| folder | policy | " + " | ".join(f"N = {n}" for n in ns) + " | falls N = 8..14 | sorted N = 3..5 |",
              "|---|---|" + "---|" * (len(ns) + 2)]
     for name in names:

@@ -45,3 +45,19 @@ def test_table_counts_and_compares_with_the_open_loop(tmp_path, capsys):
 def test_a_folder_without_cells_is_named(tmp_path, capsys):
     assert closed_loop_table.main([str(tmp_path / "nothing")]) == 2
     assert "nothing/cells has no evaluation cells" in capsys.readouterr().err
+
+
+def test_policies_and_seeds_keep_only_those_records(tmp_path, capsys):
+    off = write_folder(tmp_path / "off", {8: [(False, True)] * 4})
+    on = write_folder(tmp_path / "on", {8: [(True, False)] * 4})
+    # seed 1 of the open loop only (the closed loop was run on seed 0): left out with --seeds 0
+    ev.save_cell(ev.cell_path(off, "h-d", "ycb", 8, 1, 2),
+                 [ev.EpisodeRecord("h-d", "ycb", 8, 1, run, False, 5, 8, True) for run in range(2)])
+    ev.save_cell(ev.cell_path(on, "h-a", "ycb", 8, 0, 1), [ev.EpisodeRecord("h-a", "ycb", 8, 0, 0, True, 2, 8, False)])
+    assert closed_loop_table.main([str(off), str(on)]) == 0
+    assert "| off | h-d | 0 / 6 | 6 (+0 %) | 0 (+0) |" in capsys.readouterr().out
+    assert closed_loop_table.main([str(off), str(on), "--seeds", "0", "--policies", "h-d"]) == 0
+    text = capsys.readouterr().out
+    assert "with `off`; policies h-d only; seeds 0 only." in text
+    assert "| off | h-d | 0 / 4 | 4 (+0 %) | 0 (+0) |" in text and "| on | h-d | 4 / 0 | 0 (-100 %) | 0 (+0) |" in text
+    assert "h-a" not in text.split("Watches")[0]
