@@ -1,25 +1,41 @@
 #!/usr/bin/env bash
 # Issue 13's fall table: H-a and H-d (and the shipped P+S model when it exists) on N = 3..14 YCB,
-# 30 runs x 3 seeds (issue 10's grid), open loop vs closed loop, the same scenes. Resumable; extra
-# arguments go to shelf-evaluate. The open-loop cells are those of issue 10's evaluation
-# (scripts/evaluate_models.sh, results/models), copied (--reuse-cells) instead of run again: the
-# same scenes, but played on other machines (PyBullet differs by CPU; see the README), so compare
-# with care or delete results/closed_loop/off/cells to run them here. scripts/closed_loop_seed0.sh
-# is the two-core version (seed 0, N = 3, 5, 8, 11, 14, everything on one machine).
+# 30 runs x 3 seeds (issue 10's grid), open loop vs closed loop (the watch's defaults), the same
+# scenes. Resumable; extra arguments go to shelf-evaluate. The open-loop cells are those of issue
+# 10's evaluation (scripts/evaluate_models.sh, results/models), copied (--reuse-cells) instead of
+# run again: the same scenes, but played on other machines (PyBullet differs by CPU; see the
+# README), so compare with care or delete results/closed_loop/off/cells to run them here.
+# scripts/closed_loop_seed0.sh is the two-core version (seed 0, N = 3, 5, 8, 11, 14, everything on
+# one machine).
+#   PS_SEEDS=1 bash scripts/closed_loop_falls.sh --workers 2   # what was run on two cores: P+S on seed 0 only
+# PS=0 leaves P+S out; PS_SEEDS (default 3) is the number of seeds P+S is evaluated on (a closed-loop
+# episode of it costs ~4x a heuristic's). Writes table.md (H-a, H-d) and table_p_s.md (P+S on its seeds).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
-policies=(h-a h-d)
-# PS=0 leaves the shipped P+S model out (on two cores its 36 closed-loop cells take hours)
-if [ "${PS:-1}" = 1 ] && [ -f examples/pretrained/p_s.zip ]; then policies+=(examples/pretrained/p_s.zip); fi
+grid=(--ns 3-14 --runs 30 --object-sets ycb)
 reuse=()
 [ -d results/models/cells ] && reuse=(--reuse-cells results/models)
-shelf-evaluate --policies "${policies[@]}" --ns 3-14 --runs 30 --seeds 3 --object-sets ycb \
-    --out results/closed_loop/off "${reuse[@]}" "$@"
-shelf-evaluate --policies "${policies[@]}" --ns 3-14 --runs 30 --seeds 3 --object-sets ycb --closed-loop \
-    --out results/closed_loop/on "$@"
-for metric in fell_rate sr; do
+ps=examples/pretrained/p_s.zip
+ps_seeds=${PS_SEEDS:-3}
+shelf-evaluate --policies h-a h-d "${grid[@]}" --seeds 3 --out results/closed_loop/off "${reuse[@]}" "$@"
+shelf-evaluate --policies h-a h-d "${grid[@]}" --seeds 3 --closed-loop --out results/closed_loop/on "$@"
+policies=(h-a h-d)
+if [ "${PS:-1}" = 1 ] && [ -f "$ps" ]; then
+  shelf-evaluate --policies "$ps" "${grid[@]}" --seeds "$ps_seeds" --out results/closed_loop/off "${reuse[@]}" "$@"
+  shelf-evaluate --policies "$ps" "${grid[@]}" --seeds "$ps_seeds" --closed-loop --out results/closed_loop/on "$@"
+  policies+=("$ps")
+fi
+# one summary (results.csv, results.json) of every cell in each folder
+shelf-evaluate --policies "${policies[@]}" "${grid[@]}" --seeds 3 --out results/closed_loop/off --summarize-only
+shelf-evaluate --policies "${policies[@]}" "${grid[@]}" --seeds 3 --closed-loop --out results/closed_loop/on --summarize-only
+python scripts/closed_loop_table.py results/closed_loop/{off,on} --policies h-a h-d --out results/closed_loop/table.md
+if [ "${#policies[@]}" = 3 ]; then
+  python scripts/closed_loop_table.py results/closed_loop/{off,on} --policies p_s --seeds $(seq 0 $((ps_seeds - 1))) \
+      --out results/closed_loop/table_p_s.md
+fi
+for metric in fell_rate sr loop_rate; do
   python examples/plot_conditions.py --metric $metric --x n --runs results/closed_loop/off:off \
       results/closed_loop/on:on --out "results/closed_loop/${metric}.png"
 done
