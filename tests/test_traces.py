@@ -20,14 +20,21 @@ FELL = ev.EpisodeRecord("h-d", "ycb", 3, 2, 16, success=False, actions=1, num_un
                         noops=0, failure="fell", max_repeat=1)
 
 
-def watched_pick(scene):
-    env = gym.make("ShelfSort-v0", num_objects=2)
+def watched_pick(scene, closed_loop=False, knock=None):
+    """Pick the back box of ``scene`` with a `PhaseWatch`; ``knock(runner, knock_out)`` may first wrap
+    one of the runner's motions so that it ends with ``knock_out()``: the object nearest the opening
+    moved out of the cabinet by hand, as a fall during that motion would."""
+    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=closed_loop)
     try:
         env.reset(seed=0)
         env.unwrapped.set_scene(scene, REGIONS)
+        world = env.unwrapped.world
+        front = world.objects[int(world.positions()[:, 0].argmin())].uid  # nearest the opening
+        if knock is not None:
+            knock(env.unwrapped.primitive_runner, lambda: pb.resetBasePositionAndOrientation(
+                front, (-0.15, 0.0, 0.05), (0, 0, 0, 1), physicsClientId=env.unwrapped.client))
         watch = traces.PhaseWatch(env)
-        before = {o.uid for o in watch.world.objects}
-        front = watch.world.objects[int(watch.world.positions()[:, 0].argmin())].uid  # nearest the opening
+        before = {o.uid for o in world.objects}
         watch.begin_action()
         _, _, _, _, info = env.step(env.unwrapped.codec.action_at("pick", 0.30, 0.0))
         return info, watch.end_action(before), front
@@ -45,28 +52,17 @@ def test_a_neighbour_dragged_out_by_the_pick_is_traced_to_the_pick():
 def test_a_fall_during_the_closed_loops_put_down_is_traced_to_it():
     # the closed loop catches the crafted drag and carries the box back; a put-down that then
     # knocks the neighbour out (here: moved out by hand, as a fall in that motion would) is named
-    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop={"lane": False})
-    try:
-        env.reset(seed=0)
-        env.unwrapped.set_scene(DRAG_SCENE, REGIONS)
-        runner, world = env.unwrapped.primitive_runner, env.unwrapped.world
-        front = world.objects[int(world.positions()[:, 0].argmin())].uid
+    def knock_after_put_down(runner, knock_out):
         put_down = runner._put_down_here
 
         def knocking_put_down(*args, **kwargs):
             carried = put_down(*args, **kwargs)
-            pb.resetBasePositionAndOrientation(front, (-0.15, 0.0, 0.05), (0, 0, 0, 1),
-                                               physicsClientId=env.unwrapped.client)
+            knock_out()
             return carried
 
         runner._put_down_here = knocking_put_down
-        watch = traces.PhaseWatch(env)
-        before = {o.uid for o in world.objects}
-        watch.begin_action()
-        _, _, _, _, info = env.step(env.unwrapped.codec.action_at("pick", 0.30, 0.0))
-        fell = watch.end_action(before)
-    finally:
-        env.close()
+
+    info, fell, front = watched_pick(DRAG_SCENE, {"lane": False}, knock_after_put_down)
     assert info["interventions"] and info["fell"]
     assert fell == [{"uid": front, "phase": "pick", "held": False, "motion": "put down"}]
     table = traces.motions_table([{"policy": "h-d", "num_objects": 2, "steps": [{"fell": fell}]},
@@ -118,28 +114,17 @@ def test_episodes_are_replayed_under_the_folders_conditions(tmp_path, monkeypatc
 def test_a_fall_during_the_lane_checks_sideways_carry_is_traced_to_the_detour():
     # the lane check carries the box sideways past the front one; a detour that knocked the front
     # one out (moved out by hand, as in the test above) is named
-    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=True)
-    try:
-        env.reset(seed=0)
-        env.unwrapped.set_scene(DRAG_SCENE, REGIONS)
-        runner, world = env.unwrapped.primitive_runner, env.unwrapped.world
-        front = world.objects[int(world.positions()[:, 0].argmin())].uid
+    def knock_after_detour(runner, knock_out):
         watched_move = runner._watched_move
 
         def knocking_detour(start, end, speed, phase):
             caught = watched_move(start, end, speed, phase)
             if phase == "detour":
-                pb.resetBasePositionAndOrientation(front, (-0.15, 0.0, 0.05), (0, 0, 0, 1),
-                                                   physicsClientId=env.unwrapped.client)
+                knock_out()
             return caught
 
         runner._watched_move = knocking_detour
-        watch = traces.PhaseWatch(env)
-        before = {o.uid for o in world.objects}
-        watch.begin_action()
-        _, _, _, _, info = env.step(env.unwrapped.codec.action_at("pick", 0.30, 0.0))
-        fell = watch.end_action(before)
-    finally:
-        env.close()
+
+    info, fell, front = watched_pick(DRAG_SCENE, True, knock_after_detour)
     assert [e["phase"] for e in info["interventions"]] == ["lane"] and info["fell"]
     assert fell == [{"uid": front, "phase": "pick", "held": False, "motion": "detour"}]
