@@ -9,7 +9,13 @@
 # one machine).
 #   PS_SEEDS=1 bash scripts/closed_loop_falls.sh --workers 2   # what was run on two cores: P+S on seed 0 only
 # PS=0 leaves P+S out; PS_SEEDS (default 3) is the number of seeds P+S is evaluated on (a closed-loop
-# episode of it costs ~4x a heuristic's). Writes table.md (H-a, H-d) and table_p_s.md (P+S on its seeds).
+# episode of it costs ~4x a heuristic's). NAME (default on_deeper) names the closed-loop folder and
+# WATCH (JSON, default the watch's defaults) its DragWatch fields. Writes NAME_table.md (H-a, H-d),
+# NAME_table_p_s.md (P+S on its seeds) and the NAME_*.png plots.
+# The committed folder: on (WATCH='{"place_check": false}', the defaults before the place check; its
+# tables and plots are table.md, table_p_s.md and fell_rate / sr / loop_rate.png). The defaults
+# (on_deeper: lane check, put back when blocked, place check placing again further in) have not
+# been run on this grid yet (scripts/closed_loop_seed0.sh has them on seed 0).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
@@ -19,23 +25,27 @@ reuse=()
 [ -d results/models/cells ] && reuse=(--reuse-cells results/models)
 ps=examples/pretrained/p_s.zip
 ps_seeds=${PS_SEEDS:-3}
+name=${NAME:-on_deeper}
+loop=(--closed-loop "${WATCH:-"{}"}")
+out=results/closed_loop/$name
 shelf-evaluate --policies h-a h-d "${grid[@]}" --seeds 3 --out results/closed_loop/off "${reuse[@]}" "$@"
-shelf-evaluate --policies h-a h-d "${grid[@]}" --seeds 3 --closed-loop --out results/closed_loop/on "$@"
+shelf-evaluate --policies h-a h-d "${grid[@]}" --seeds 3 "${loop[@]}" --out "$out" "$@"
 policies=(h-a h-d)
 if [ "${PS:-1}" = 1 ] && [ -f "$ps" ]; then
   shelf-evaluate --policies "$ps" "${grid[@]}" --seeds "$ps_seeds" --out results/closed_loop/off "${reuse[@]}" "$@"
-  shelf-evaluate --policies "$ps" "${grid[@]}" --seeds "$ps_seeds" --closed-loop --out results/closed_loop/on "$@"
+  shelf-evaluate --policies "$ps" "${grid[@]}" --seeds "$ps_seeds" "${loop[@]}" --out "$out" "$@"
   policies+=("$ps")
 fi
 # one summary (results.csv, results.json) of every cell in each folder
 shelf-evaluate --policies "${policies[@]}" "${grid[@]}" --seeds 3 --out results/closed_loop/off --summarize-only
-shelf-evaluate --policies "${policies[@]}" "${grid[@]}" --seeds 3 --closed-loop --out results/closed_loop/on --summarize-only
-python scripts/closed_loop_table.py results/closed_loop/{off,on} --policies h-a h-d --out results/closed_loop/table.md
+shelf-evaluate --policies "${policies[@]}" "${grid[@]}" --seeds 3 "${loop[@]}" --out "$out" --summarize-only
+python scripts/closed_loop_table.py results/closed_loop/off "$out" --policies h-a h-d \
+    --out "results/closed_loop/${name}_table.md"
 if [ "${#policies[@]}" = 3 ]; then
-  python scripts/closed_loop_table.py results/closed_loop/{off,on} --policies p_s --seeds $(seq 0 $((ps_seeds - 1))) \
-      --out results/closed_loop/table_p_s.md
+  python scripts/closed_loop_table.py results/closed_loop/off "$out" --policies p_s --seeds $(seq 0 $((ps_seeds - 1))) \
+      --out "results/closed_loop/${name}_table_p_s.md"
 fi
 for metric in fell_rate sr loop_rate; do
   python examples/plot_conditions.py --metric $metric --x n --runs results/closed_loop/off:off \
-      results/closed_loop/on:on --out "results/closed_loop/${metric}.png"
+      "$out:$name" --out "results/closed_loop/${name}_${metric}.png"
 done

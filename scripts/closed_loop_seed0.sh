@@ -3,18 +3,21 @@
 # N = 3, 5, 8, 11, 14 (30 runs each), and the shipped P+S model at N = 5, 8, 11 (PS=0 leaves it
 # out), open loop vs closed loop, both run here so that every compared episode comes from one
 # machine. Resumable; extra arguments go to shelf-evaluate.
-#   bash scripts/closed_loop_seed0.sh --workers 2                       # the watch's defaults -> on_lane_pb/
+#   bash scripts/closed_loop_seed0.sh --workers 2                       # the watch's defaults -> on_deeper/
 #   WATCH='{"sustain": 2}' NAME=on_s2 bash scripts/closed_loop_seed0.sh  # a variant -> on_s2/
-# The committed folders: on_lane_pb (the defaults: lane check, put back when blocked),
-# on_lane (WATCH='{"blocked": "carry"}', PS=0), on (WATCH='{"lane": false}': the force and camera
-# watches alone), on_s2 (WATCH='{"lane": false, "sustain": 2, "threshold": 0.5}', PS=0) and on_s2in
-# (on_s2's with "judge_outside": false, PS=0); each conditions.json holds every field it ran with.
+# The committed folders: on_deeper (the defaults: lane check, put back when blocked, place check
+# placing a refused object again further in), on_place (WATCH='{"stacked": "put back"}'),
+# on_lane_pb (WATCH='{"place_check": false}'), on_lane (WATCH='{"blocked": "carry", "place_check":
+# false}', PS=0), on (WATCH='{"lane": false, "place_check": false}': the force and camera watches
+# alone), on_s2 (on's with "sustain": 2, "threshold": 0.5, PS=0) and on_s2in (on_s2's with
+# "judge_outside": false, PS=0); each conditions.json holds every field it ran with.
+# on_lane_pb_safe and on_deeper_safe add --safe-picks (run with shelf-evaluate, see the README).
 # scripts/closed_loop_falls.sh is the full grid (N = 3..14, 3 seeds).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
-name=${NAME:-on_lane_pb}
+name=${NAME:-on_deeper}
 watch=${WATCH:-"{}"}
 for out in off "$name"; do
   loop=()

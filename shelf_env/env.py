@@ -62,6 +62,7 @@ every result before 2026-11-23. ``benchmarks/env_step.py --compare`` measures bo
 from __future__ import annotations
 
 import dataclasses
+import functools
 from numbers import Integral
 from typing import Any
 
@@ -235,6 +236,8 @@ class ShelfSortEnv(gym.Env):
                                            look=None if self.watch_camera is None else self.watch_camera.front_edges)
         if self.drag_watch is not None and self.drag_watch.lane:
             self.primitive_runner.plan_carry = self._carry_shift
+        if self.drag_watch is not None and self.drag_watch.place_check:
+            self.primitive_runner.plan_place = functools.partial(self._place_for, min_front=self.drag_watch.stack_front)
         for camera in (getattr(self, "camera", None), self.watch_camera):
             if camera is not None:  # same bodies in the same order: same ids, but say so rather than assume
                 camera.hidden_bodies = self.world.decorative
@@ -382,7 +385,9 @@ class ShelfSortEnv(gym.Env):
         """Pick at (x, y); if the cup holds an object, place it where `_place_for` puts it."""
         grasp = self.primitive_runner.pick(x, y, surface_z, {o.uid for o in self.world.objects})
         if grasp is not None:
-            self.primitive_runner.place(grasp, *self._place_for(grasp.uid))
+            target = self._place_for(grasp.uid)
+            assert target is not None  # always one without min_front
+            self.primitive_runner.place(grasp, *target)
 
     @property
     def detour_reach(self) -> float:
@@ -444,8 +449,10 @@ class ShelfSortEnv(gym.Env):
             mask[:] = True
         return mask
 
-    def _place_for(self, uid: int) -> tuple[float, float]:
-        """Tool (x, y) that puts the held object's centre where the place heuristic wants it.
+    def _place_for(self, uid: int, min_front: float = 0.0) -> tuple[float, float] | None:
+        """Tool (x, y) that puts the held object's centre where the place heuristic wants it; with
+        ``min_front`` (the closed loop's place check, `DragWatch.stacked`) where it wants it with the
+        footprint's front edge that far behind the opening, None when no centre in the region allows it.
 
         The heuristic chooses where the object's footprint goes; the cup may hold the object off
         centre (it grips where the pick pixel was), so the tool target is shifted by the object's
@@ -457,7 +464,10 @@ class ShelfSortEnv(gym.Env):
         aabb_min, aabb_max = (np.asarray(v) for v in pb.getAABB(uid, physicsClientId=self.client))
         footprint = (aabb_max[0] - aabb_min[0], aabb_max[1] - aabb_min[1])
         centre_x, centre_y = place_position(cell_uid, self._class_of_uid(), self._regions_mask[obj.cls],
-                                            obj.cls, footprint, self.camera.pixel_size, ignore_uid=uid)
+                                            obj.cls, footprint, self.camera.pixel_size, ignore_uid=uid,
+                                            min_front=min_front)
+        if min_front > 0 and centre_x - footprint[0] / 2 < min_front:
+            return None
         offset = (aabb_min[:2] + aabb_max[:2]) / 2 - self.robot.tcp_position()[:2]
         return clip_target(centre_x - offset[0], centre_y - offset[1])
 

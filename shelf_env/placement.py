@@ -46,12 +46,15 @@ def place_position(
     ignore_uid: int | None = None,
     margin: float = 0.01,
     weights: PlaceWeights = PlaceWeights(),
+    min_front: float = 0.0,
 ) -> tuple[float, float]:
     """Cabinet (x, y) where to release an object of class ``cls``.
 
     ``cell_uid``: semantic map (rows back -> front, cols left -> right); ``region_mask``: cells of
     the class's target region; ``footprint``: the held object's (x, y) extent; ``ignore_uid``:
-    the held object, whose old cells are free now.
+    the held object, whose old cells are free now; ``min_front``: metres behind the opening the
+    footprint's front edge must stay (the closed loop's place check, `shelf_env.robot.DragWatch`),
+    unless no centre in the region allows it.
     """
     rows, cols = cell_uid.shape
     occupied = cell_uid != FREE
@@ -81,6 +84,8 @@ def place_position(
     centre_in[rows - kh // 2:] = False
     centre_in[:, : kw // 2] = False
     centre_in[:, cols - kw // 2:] = False
+    if min_front > 0:
+        centre_in &= (x - footprint[0] / 2 >= min_front)[:, None]
     if not centre_in.any():
         centre_in = region_mask
     for feasible in (centre_in & (blocked == 0) & (outside_region == 0), centre_in & (blocked == 0)):

@@ -20,6 +20,7 @@ constraint is created between cup and object; releasing removes it.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
@@ -354,6 +355,8 @@ def carry_height(motion: MotionConfig) -> float:
 
 #: What the lane check (`DragWatch.lane`) does when no way out is clear.
 BLOCKED_REACTIONS = ("carry", "put back")
+#: What the place check (`DragWatch.place_check`) does with a refused landing (`DragWatch.stacked`).
+STACKED_REACTIONS = ("deeper", "put back")
 
 
 @dataclass(frozen=True)
@@ -361,8 +364,8 @@ class DragWatch:
     """Closed-loop watch of a carried object (``ShelfSortEnv(closed_loop=True)``, or a dict of these
     fields, or a DragWatch).
 
-    Three signals a real robot has, no object poses: a look at the carry's way out before it
-    starts, and two watches during it.
+    Signals a real robot has, no object poses: a look at the carry's way out before it starts, two
+    watches during it, and where the place's descent stopped.
 
     - **Lane** (``lane``): after the lift, before the carry out, the camera's heightmap (the
       observation the policy acted on: object cells and their heights) says whether the object,
@@ -399,6 +402,24 @@ class DragWatch:
       dragged neighbour is mostly hidden under the carried object (tests/test_closed_loop.py: seen
       3.4 cm late).
 
+    - **Place check** (``place_check``): the place lowers the held object until it touches
+      something. Where the descent stopped (the commanded TCP height less the object's hang under
+      the cup) tells the robot whether the object landed on the floor or on other objects; with the
+      grasp's offset it also knows where the object's front edge is. A landing more than
+      ``stack_height`` m above the floor with the front edge less than ``stack_front`` m behind the
+      opening is refused: the object is not released. ``stacked`` says what happens instead:
+      ``"put back"`` lifts it, carries it out the way it came, in again along the lane its pick
+      carried it out, and puts it down where it was picked; ``"deeper"`` lifts it and places it
+      again where the place heuristic puts it with its front edge at least ``stack_front`` behind
+      the opening (on the same observation; put back where the region has no such place). Why: with the
+      lane check, most objects that still left the cabinet were the held object at the place (26 of
+      38, `results/closed_loop_seed0/on_lane_pb/falls.md`). Replayed, all 26 had been placed by the
+      place heuristic's fallback for a full region (no free footprint: the least covered one, which
+      is near the opening), landed on other objects and slid out forwards after the release. Of
+      H-a's 19 landings on other objects in seed 0's 30 scenes at N = 8 (an ad-hoc replay), the 4
+      that fell had their front edge within 2 cm of the opening and none behind 5.5 cm fell; fallen
+      ones in the 26 had it up to ~8.5 cm behind: hence 0.10 m.
+
     Reaction to a drag the watches catch: stop, carry the object back ``back_off`` m along the path
     it came (free a moment ago; the default 1 m is the whole way, so it is put back where it was
     picked), lower it straight down until something carries it (a contact pushing it up), release
@@ -432,9 +453,13 @@ class DragWatch:
     lane: bool = True  # before the retreat, check the carry's way out in the camera's heightmap
     detour_max: float = 0.2  # metres the lane check may shift the carry sideways to find a clear way out
     blocked: str = "put back"  # no clear way out: "put back" (where picked) or "carry" (straight, watched)
+    place_check: bool = True  # refuse a place landing on other objects at the opening (put back instead)
+    stack_height: float = 0.02  # metres above the floor the held object's bottom may land and count as on the floor
+    stack_front: float = 0.10  # metres behind the opening within which a landing on other objects is refused
+    stacked: str = "deeper"  # a refused landing: "deeper" (placed again further in) or "put back" (where picked)
 
     def __post_init__(self) -> None:
-        for name in ("threshold", "camera_shift", "back_off", "detour_max"):
+        for name in ("threshold", "camera_shift", "back_off", "detour_max", "stack_height", "stack_front"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < float("inf"):
                 raise ValueError(f"DragWatch.{name} must be a finite number >= 0, got {value!r}")
@@ -446,7 +471,9 @@ class DragWatch:
             raise ValueError(f"DragWatch.sustain must be >= 1, got {self.sustain}")
         if self.blocked not in BLOCKED_REACTIONS:
             raise ValueError(f"DragWatch.blocked must be one of {BLOCKED_REACTIONS}, got {self.blocked!r}")
-        for name in ("force", "judge_outside", "lane"):
+        if self.stacked not in STACKED_REACTIONS:
+            raise ValueError(f"DragWatch.stacked must be one of {STACKED_REACTIONS}, got {self.stacked!r}")
+        for name in ("force", "judge_outside", "lane", "place_check"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"DragWatch.{name} must be True or False, got {getattr(self, name)!r}")
         if isinstance(self.speed_scale, bool) or not isinstance(self.speed_scale, (int, float)) \
@@ -473,12 +500,16 @@ class DragWatch:
 
 @dataclass(frozen=True)
 class Grasp:
-    """What a successful pick leaves in the cup: the object and where the carry stopped (in front
-    of the opening, at carry height)."""
+    """What a successful pick leaves in the cup: the object, where the carry stopped (in front of
+    the opening, at carry height, ``lane_y`` after a detour) and where the object was picked (the
+    TCP's ``x``, ``y``: the closed loop's place check puts it back there)."""
 
     uid: int
     out_x: float
     z_carry: float
+    x: float
+    y: float
+    lane_y: float
 
 
 class Primitives:
@@ -501,6 +532,10 @@ class Primitives:
         #: (along y) of the nearest carry out of the opening that clears every visible neighbour,
         #: 0.0 for straight out, None when none is clear (set by the env from its heightmap).
         self.plan_carry: Callable[[float, float], float | None] | None = None
+        #: The place check's ``stacked="deeper"`` (`DragWatch.stacked`): for the held object's uid,
+        #: the tool (x, y) where the place heuristic puts it with its front edge ``stack_front``
+        #: behind the opening, None where the region allows none (set by the env).
+        self.plan_place: Callable[[int], tuple[float, float] | None] | None = None
 
     def push(self, x: float, y: float, direction: float,
              length: float = params.PUSH_LENGTH, height: float = params.PUSH_HEIGHT) -> None:
@@ -556,6 +591,7 @@ class Primitives:
         lifted = np.array([x, y, z_carry])
         if self._watched_move(here, lifted, m.lift_speed, "lift"):
             return None
+        pick_y = y
         if self.watch is not None and self.watch.lane and self.plan_carry is not None:
             shift = self.plan_carry(x, y)
             event = {"primitive": "pick", "phase": "lane", "signal": "lane",
@@ -576,7 +612,7 @@ class Primitives:
         out_x = float(np.clip(-ahead - 0.01, OUTSIDE_X_MIN, m.outside_x))
         if self._watched_move(lifted, np.array([out_x, y, z_carry]), m.approach_speed, "retreat"):
             return None
-        return Grasp(int(obj), out_x, float(z_carry))
+        return Grasp(int(obj), out_x, float(z_carry), float(x), float(pick_y), float(y))
 
     def _watched_move(self, start: np.ndarray, end: np.ndarray, speed: float, phase: str) -> bool:
         """Move the held object; with a `DragWatch`, stop on a drag (its force or camera rule), carry
@@ -676,11 +712,69 @@ class Primitives:
         r.teleport(np.array([out_x, y, z_carry]))
         r.move_linear(np.array([out_x, y, z_carry]), np.array([x, y, z_carry]), m.approach_speed)
         z_release = min(max(hang + m.release_gap, 0.0), z_carry)
-        self._lower_and_release(obj, np.array([x, y, z_carry]), np.array([x, y, z_release]))
+        refuse = None
+        if self.watch is not None and self.watch.place_check:
+            # the held object's front edge relative to the cup (it hangs rigidly under it)
+            behind = pb.getAABB(obj, physicsClientId=r.client)[0][0] - self._commanded_tcp()[0]
+            refuse = functools.partial(self._landed_on_others, hang, behind)
+        if self._lower_and_release(obj, np.array([x, y, z_carry]), np.array([x, y, z_release]), refuse):
+            return
+        assert self.watch is not None
+        deeper = self.plan_place(obj) if self.watch.stacked == "deeper" and self.plan_place is not None else None
+        if deeper is None:
+            self._put_back(grasp, y)
+            self.interventions[-1]["reaction"] = "landed on objects at the opening: put back where picked"
+            return
+        # lift it, carry it over to the deeper place at carry height and place it there
+        here = self._commanded_tcp()
+        top = np.array([here[0], here[1], z_carry])
+        r.move_linear(here, top, m.vertical_speed)
+        start = np.array([deeper[0], deeper[1], z_carry])
+        r.move_linear(top, start, m.approach_speed)
+        self.interventions[-1]["reaction"] = (f"landed on objects at the opening: placed again at "
+                                              f"({deeper[0]:.3f}, {deeper[1]:.3f})")
+        self._lower_and_release(obj, start, np.array([deeper[0], deeper[1], z_release]))
 
-    def _lower_and_release(self, obj: int, start: np.ndarray, low: np.ndarray) -> None:
+    def _landed_on_others(self, hang: float, behind: float) -> bool:
+        """The place check (`DragWatch.place_check`), when the lowering has stopped: the held object's
+        bottom (the commanded TCP height less the hang) is more than ``stack_height`` above the floor,
+        so it rests on other objects, and its front edge is less than ``stack_front`` behind the
+        opening. Records the intervention (its reaction is the caller's) when it refuses the landing."""
+        assert self.watch is not None
+        tcp = self._commanded_tcp()
+        bottom, front = float(tcp[2] - hang), float(tcp[0] + behind)
+        if bottom <= self.watch.stack_height or front >= self.watch.stack_front:
+            return False
+        self.interventions.append({
+            "primitive": "place", "phase": "land", "signal": "height", "bottom_m": round(bottom, 4),
+            "front_m": round(front, 4), "tcp": [round(float(v), 4) for v in tcp]})
+        return True
+
+    def _put_back(self, grasp: Grasp, y: float) -> None:
+        """The place check's ``stacked="put back"``: lift the still-held object to carry height, carry it out the
+        way it came in (at ``y``), in again along the lane its pick carried it out (free then), over
+        the spot where it was picked, and put it down there (`_put_down_here`)."""
+        r, m = self.robot, self.robot.motion
+        here = self._commanded_tcp()
+        top = np.array([here[0], here[1], grasp.z_carry])
+        r.move_linear(here, top, m.vertical_speed)
+        outside = np.array([grasp.out_x, y, grasp.z_carry])
+        r.move_linear(top, outside, m.approach_speed)
+        lane = np.array([grasp.out_x, grasp.lane_y, grasp.z_carry])
+        r.teleport(lane)
+        inside = np.array([grasp.x, grasp.lane_y, grasp.z_carry])
+        r.move_linear(lane, inside, m.approach_speed)
+        if grasp.lane_y != grasp.y:
+            above = np.array([grasp.x, grasp.y, grasp.z_carry])
+            r.move_linear(inside, above, m.approach_speed)
+            inside = above
+        self._put_down_here(inside)
+
+    def _lower_and_release(self, obj: int, start: np.ndarray, low: np.ndarray,
+                           refuse: Callable[[], bool] | None = None) -> bool:
         """Lower the held ``obj`` from ``start`` towards ``low`` until it touches anything but the
-        tool, release it, lift the cup clear and leave the cabinet (in front of the opening) for home."""
+        tool, release it, lift the cup clear and leave the cabinet (in front of the opening) for home.
+        If ``refuse`` says so once the lowering has stopped, return False instead, still holding it."""
         r, m = self.robot, self.robot.motion
 
         def landed() -> bool:  # the held object touches anything but the tool
@@ -689,6 +783,8 @@ class Primitives:
 
         x, y = float(low[0]), float(low[1])
         r.move_linear(start, low, m.lift_speed, stop=landed)
+        if refuse is not None and refuse():
+            return False
         r.release()
         r.hold_still(12)
         here = self._commanded_tcp()
@@ -696,6 +792,7 @@ class Primitives:
         here = self._commanded_tcp()
         r.move_linear(here, np.array([min(m.outside_x, x), y, here[2]]), m.approach_speed)
         r.go_home()
+        return True
 
     def _commanded_tcp(self) -> np.ndarray:
         """TCP position of the last commanded joint angles (the path the planner is on)."""

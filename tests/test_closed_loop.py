@@ -116,6 +116,10 @@ def test_closed_loop_leaves_a_clean_pick_alone():
     ({"lane": "yes"}, "DragWatch.lane must be True or False"),
     ({"detour_max": -0.1}, "DragWatch.detour_max must be a finite number >= 0"),
     ({"blocked": "drop"}, r"DragWatch.blocked must be one of \('carry', 'put back'\), got 'drop'"),
+    ({"place_check": 1}, "DragWatch.place_check must be True or False"),
+    ({"stack_height": -0.01}, "DragWatch.stack_height must be a finite number >= 0"),
+    ({"stack_front": float("inf")}, "DragWatch.stack_front must be a finite number >= 0"),
+    ({"stacked": "drop"}, r"DragWatch.stacked must be one of \('deeper', 'put back'\), got 'drop'"),
 ])
 def test_bad_watch_fields_are_named(fields, message):
     with pytest.raises(ValueError, match=message):
@@ -179,3 +183,70 @@ def test_the_watches_without_the_lane_check_leave_a_clean_pick_alone_too():
     closed = pick_back_box(CLEAN_SCENE, closed_loop={"lane": False}, physics="reference")
     assert closed[2]["interventions"] == [] and closed[0] == open_loop[0]
     assert closed[3] == pytest.approx(open_loop[3], abs=1e-6)
+
+
+# a 10 cm box picked at the back, and a low wide 6 cm box near the opening: placed with its centre
+# 5 cm behind the opening, the picked box lands with its back on the low one, tips forward and
+# falls out open loop
+STACK_SCENE = [(tall(0.10, 0.3), 1, 0.30, 0.20, 0.0),
+               (ObjectSpec("cuboid", "box", (0.10, 0.12, 0.06), 0.3), 2, 0.10, 0.0, 0.0)]
+
+
+def pick_and_place(closed_loop, place_x: float):
+    """Pick STACK_SCENE's back box and place it at (place_x, 0): the primitives themselves, so that
+    the place pose is the test's and not the place heuristic's."""
+    env = gym.make("ShelfSort-v0", num_objects=2, closed_loop=closed_loop).unwrapped
+    try:
+        env.reset(seed=0)
+        env.set_scene(STACK_SCENE, REGIONS)
+        runner = env.primitive_runner
+        grasp = runner.pick(0.30, 0.20, 0.10, {o.uid for o in env.world.objects})
+        assert grasp is not None and (grasp.x, grasp.y, grasp.lane_y) == (0.30, 0.20, 0.20)
+        runner.place(grasp, place_x, 0.0)
+        env.robot.hold_still(240)
+        return env.world.positions(), runner.interventions
+    finally:
+        env.close()
+
+
+def test_open_loop_place_on_an_object_at_the_opening_drops_the_held_one_out():
+    positions, interventions = pick_and_place({"place_check": False}, 0.05)
+    assert positions[0, 0] < 0 and interventions == []  # out of the cabinet
+    positions, _ = pick_and_place(False, 0.05)
+    assert positions[0, 0] < 0
+
+
+def test_the_place_check_puts_the_object_back_instead_of_releasing_it_on_others_at_the_opening():
+    positions, interventions = pick_and_place({"stacked": "put back"}, 0.05)
+    (event,) = interventions
+    assert event["primitive"] == "place" and event["phase"] == "land" and event["signal"] == "height"
+    assert event["bottom_m"] == pytest.approx(0.06, abs=0.005)  # on the 6 cm box
+    assert event["front_m"] == pytest.approx(0.02, abs=0.01)  # 5 cm less half the 6 cm box
+    assert event["reaction"] == "landed on objects at the opening: put back where picked"
+    assert positions[0] == pytest.approx([0.30, 0.20, 0.05], abs=0.005)  # back where it was picked
+    assert positions[1] == pytest.approx([0.10, 0.0, 0.03], abs=0.003)  # the low box untouched
+
+
+@pytest.mark.parametrize("watch, place_x", [
+    ({"stack_front": 0.01}, 0.05),  # its front 2 cm behind the opening: not "at the opening" for this watch
+    ({"stack_height": 0.07}, 0.05),  # 6 cm up counts as on the floor for this watch
+    (True, 0.25),  # on the floor, deep inside
+])
+def test_the_place_check_releases_where_its_rule_allows(watch, place_x):
+    positions, interventions = pick_and_place(watch, place_x)
+    assert interventions == []
+    assert positions[0, 0] != pytest.approx(0.30, abs=0.01)  # released, not put back
+
+
+def test_stacked_deeper_places_the_refused_object_again_further_in():
+    positions, interventions = pick_and_place(True, 0.05)  # the defaults
+    (event,) = interventions
+    assert event["phase"] == "land" and event["reaction"].startswith(
+        "landed on objects at the opening: placed again at (")
+    x, y = (float(v) for v in event["reaction"].split("(")[1].rstrip(")").split(", "))
+    # released on the floor, its front edge (the 6 cm box's half width ahead of its centre) at least
+    # stack_front behind the opening, where the place heuristic wants a class-1 object
+    assert positions[0, 2] == pytest.approx(0.05, abs=0.005)
+    assert positions[0, 0] - 0.03 >= 0.10 - 0.005
+    assert positions[0, :2] == pytest.approx([x, y], abs=0.01)
+    assert positions[1] == pytest.approx([0.10, 0.0, 0.03], abs=0.003)
