@@ -10,12 +10,13 @@
 #   PS_SEEDS=1 bash scripts/closed_loop_falls.sh --workers 2   # what was run on two cores: P+S on seed 0 only
 # PS=0 leaves P+S out; PS_SEEDS (default 3) is the number of seeds P+S is evaluated on (a closed-loop
 # episode of it costs ~4x a heuristic's). NAME (default on_deeper) names the closed-loop folder and
-# WATCH (JSON, default the watch's defaults) its DragWatch fields. Writes NAME_table.md (H-a, H-d),
+# WATCH (JSON, default the watch's defaults) its DragWatch fields; SAFE=1 adds --safe-picks to the
+# closed-loop runs (not to the open-loop ones). Writes NAME_table.md (H-a, H-d),
 # NAME_table_p_s.md (P+S on its seeds) and the NAME_*.png plots.
 # The committed folder: on (WATCH='{"place_check": false}', the defaults before the place check; its
 # tables and plots are table.md, table_p_s.md and fell_rate / sr / loop_rate.png). The defaults
-# (on_deeper: lane check, put back when blocked, place check placing again further in) have not
-# been run on this grid yet (scripts/closed_loop_seed0.sh has them on seed 0).
+# with safe picks (SAFE=1 NAME=on_deeper_safe: issue 13's recommended setting) are being run on this
+# grid cell by cell (scripts/closed_loop_seed0.sh has the defaults on seed 0).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
@@ -27,6 +28,7 @@ ps=examples/pretrained/p_s.zip
 ps_seeds=${PS_SEEDS:-3}
 name=${NAME:-on_deeper}
 loop=(--closed-loop "${WATCH:-"{}"}")
+[ "${SAFE:-0}" = 1 ] && loop+=(--safe-picks)
 out=results/closed_loop/$name
 shelf-evaluate --policies h-a h-d "${grid[@]}" --seeds 3 --out results/closed_loop/off "${reuse[@]}" "$@"
 shelf-evaluate --policies h-a h-d "${grid[@]}" --seeds 3 "${loop[@]}" --out "$out" "$@"

@@ -39,11 +39,11 @@ observation, the masks and the env's own planning see the noisy map, rewards the
 the heightmap says whether the carried object clears its neighbours; if not, it is carried sideways
 to the nearest clear way out, or put back where it was picked when there is none. During the
 carry the cup's force sensor and a small camera image watch for a dragged neighbour, and a drag
-they catch makes the robot carry the object back and put it down (`shelf_env.robot.DragWatch`; a
-dict of its fields or a DragWatch tunes it); ``info["interventions"]`` lists what it did. It cuts
-the heuristics' falls at N = 8..14 by 65-72 % and sorts 3-4 more of 60 episodes at N = 3..5, but
-loses 4-5 of 30 at N = 8, where a heuristic picks the put-back object again until the time-out
-(`results/closed_loop_seed0/`).
+they catch makes the robot carry the object back and put it down. When the place's descent stops
+on other objects near the opening, the object is not released there but placed again further in
+(`shelf_env.robot.DragWatch`; a dict of its fields or a DragWatch tunes it); ``info["interventions"]``
+lists what it did. On seed 0's scenes it cuts the heuristics' falls at N = 8..14 by 82-85 % and
+sorts 2-4 more of 60 episodes at N = 3..5 (`results/closed_loop_seed0/`).
 
 ``safe_picks=True`` (off by default): `action_masks` leaves out the picks whose object would be
 carried out of the opening through a taller visible neighbour (`shelf_env.clearance`), the motion

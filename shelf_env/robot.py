@@ -432,11 +432,17 @@ class DragWatch:
     H-d on seed 0's 30 YCB scenes per N, one machine; episodes with a fall at N = 8..14 and sorted
     episodes at N = 3..5, of 60, against open loop):
 
-    - these defaults (folder ``on_lane_pb``): falls -65 % (H-a) and -72 % (H-d), sorted +3 and +4;
-      the price is at N = 8, where a heuristic that picks the put-back object again loops until
-      the time-out: sorted 13 -> 9 (H-a) and 12 -> 7 (H-d) of 30;
-    - ``lane`` with ``blocked="carry"`` (``on_lane``): falls -36 % / -21 %, sorted +6 / +7;
-    - no lane check (``lane=False``, ``on``): falls -27 % / -22 %, sorted +4 / +3;
+    - these defaults (folder ``on_deeper``): falls -85 % (H-a) and -82 % (H-d), sorted +2 and +4;
+      sorted over N = 3..14 (5 N) 67 and 70 of 150, open loop 64 and 66; with the env's
+      ``safe_picks=True`` too (``on_deeper_safe``, no pick is put back): falls -78 % / -63 %,
+      sorted +4 / +8, over N = 3..14 74 / 79 of 150;
+    - ``stacked="put back"`` (``on_place``): falls -95 % / -93 %, sorted +1 / +3, but over N = 3..14
+      60 / 63 of 150: a heuristic that picks the put-back object again loops until the time-out;
+    - no place check (``place_check=False``, ``on_lane_pb``): falls -65 % / -72 %, sorted +3 / +4;
+      sorted at N = 8 13 -> 9 (H-a) and 12 -> 7 (H-d) of 30, loops again;
+    - ``lane`` with ``blocked="carry"`` and no place check (``on_lane``): falls -36 % / -21 %,
+      sorted +6 / +7;
+    - no lane and no place check (``on``): falls -27 % / -22 %, sorted +4 / +3;
       ``{"sustain": 2, "threshold": 0.5, "judge_outside": False}`` (``on_s2in``): -38 % / -45 %,
       sorted +5 / -2.
     """
@@ -705,7 +711,9 @@ class Primitives:
 
     def place(self, grasp: Grasp, x: float, y: float) -> None:
         """Carry the held object of ``grasp`` in front of (x, y), in at carry height, lower it
-        until it lands (or hangs just above the floor), release it and go home."""
+        until it lands (or hangs just above the floor), release it and go home. With the closed
+        loop's place check (`DragWatch.place_check`) a landing on other objects at the opening is
+        not released: the object is placed again further in or put back (`DragWatch.stacked`)."""
         r, m = self.robot, self.robot.motion
         obj, out_x, z_carry = grasp.uid, grasp.out_x, grasp.z_carry
         hang = self._commanded_tcp()[2] - pb.getAABB(obj, physicsClientId=r.client)[0][2]
