@@ -7,7 +7,9 @@ N = 3..5 against the first folder (the open loop).
 
 Each folder's watch (its ``conditions.json``) is printed under the table. ``--policies`` and
 ``--seeds`` keep only those records (e.g. a policy evaluated on fewer seeds in one folder than in
-another: compare it on the seeds both have).
+another: compare it on the seeds both have). A comparison column is ``-`` where the folder or the
+first one lacks a cell of its N range, or the two have different numbers of runs in one (a grid
+still being evaluated).
 """
 
 from __future__ import annotations
@@ -59,12 +61,15 @@ def main(argv: list[str] | None = None) -> int:
                 continue  # not evaluated in this folder
             cells = [f"{sorted_[(name, policy, n)]} / {fell[(name, policy, n)]}" if runs[(name, policy, n)] else "-"
                      for n in ns]
-            falls = sum(fell[(name, policy, n)] for n in ns if 8 <= n <= 14)
-            base_falls = sum(fell[(names[0], policy, n)] for n in ns if 8 <= n <= 14)
-            won = sum(sorted_[(name, policy, n)] for n in ns if 3 <= n <= 5)
-            base_won = sum(sorted_[(names[0], policy, n)] for n in ns if 3 <= n <= 5)
+            falls, base_falls = (sum(fell[(f, policy, n)] for n in ns if 8 <= n <= 14) for f in (name, names[0]))
+            won, base_won = (sum(sorted_[(f, policy, n)] for n in ns if 3 <= n <= 5) for f in (name, names[0]))
             change = f"{falls} ({100 * (falls - base_falls) / base_falls:+.0f} %)" if base_falls else str(falls)
-            lines.append(f"| {name} | {policy} | " + " | ".join(cells) + f" | {change} | {won} ({won - base_won:+d}) |")
+            gain = f"{won} ({won - base_won:+d})"
+            for lo, hi in ((8, 14), (3, 5)):
+                span = [n for n in ns if lo <= n <= hi]
+                if not all(runs[(name, policy, n)] == runs[(names[0], policy, n)] > 0 for n in span):
+                    change, gain = ("-", gain) if lo == 8 else (change, "-")
+            lines.append(f"| {name} | {policy} | " + " | ".join(cells) + f" | {change} | {gain} |")
     lines += ["", "Watches (`conditions.json`):", ""]
     for folder in args.folders:
         path = folder / "conditions.json"

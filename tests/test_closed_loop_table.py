@@ -39,7 +39,17 @@ def test_table_counts_and_compares_with_the_open_loop(tmp_path, capsys):
     ev.save_cell(ev.cell_path(off, "h-a", "ycb", 3, 0, 1), records)
     assert closed_loop_table.main([str(off), str(on)]) == 0
     text = capsys.readouterr().out
-    assert "| off | h-a | 1 / 0 | - | 0 | 1 (+0) |" in text and "| on | h-a |" not in text
+    assert "| off | h-a | 1 / 0 | - | - | 1 (+0) |" in text and "| on | h-a |" not in text
+
+
+def test_a_grid_still_being_evaluated_is_not_compared(tmp_path, capsys):
+    off = write_folder(tmp_path / "off", {3: [(True, False)] * 2, 8: [(False, True)] * 2})
+    on = write_folder(tmp_path / "on", {3: [(True, False)] * 2})  # N = 8 not evaluated yet
+    assert closed_loop_table.main([str(off), str(on)]) == 0
+    assert "| on | h-d | 2 / 0 | - | - | 2 (+0) |" in capsys.readouterr().out
+    fewer = write_folder(tmp_path / "fewer", {3: [(True, False)], 8: [(False, False)] * 2})  # 1 run of 2 at N = 3
+    assert closed_loop_table.main([str(off), str(fewer)]) == 0
+    assert "| fewer | h-d | 1 / 0 | 0 / 0 | 0 (-100 %) | - |" in capsys.readouterr().out
 
 
 def test_a_folder_without_cells_is_named(tmp_path, capsys):
