@@ -13,10 +13,11 @@
 # WATCH (JSON, default the watch's defaults) its DragWatch fields; SAFE=1 adds --safe-picks to the
 # closed-loop runs (not to the open-loop ones). Writes NAME_table.md (H-a, H-d),
 # NAME_table_p_s.md (P+S on its seeds) and the NAME_*.png plots.
-# The committed folder: on (WATCH='{"place_check": false}', the defaults before the place check; its
-# tables and plots are table.md, table_p_s.md and fell_rate / sr / loop_rate.png). The defaults
-# with safe picks (SAFE=1 NAME=on_deeper_safe: issue 13's recommended setting) are being run on this
-# grid cell by cell (scripts/closed_loop_seed0.sh has the defaults on seed 0).
+# The committed folders: on (WATCH='{"place_check": false}', the defaults before the place check; its
+# tables and plots are table.md, table_p_s.md and fell_rate / sr / loop_rate.png) and on_deeper_safe
+# (the defaults with safe picks, issue 13's recommended setting: SAFE=1 NAME=on_deeper_safe
+# PS_SEEDS=1 bash scripts/closed_loop_falls.sh --workers 2, ~85 min for its 48 cells at N = 7..14
+# on two cores). scripts/closed_loop_seed0.sh has the defaults on seed 0.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
