@@ -42,8 +42,11 @@ carry the cup's force sensor and a small camera image watch for a dragged neighb
 they catch makes the robot carry the object back and put it down. When the place's descent stops
 on other objects near the opening, the object is not released there but placed again further in
 (`shelf_env.robot.DragWatch`; a dict of its fields or a DragWatch tunes it); ``info["interventions"]``
-lists what it did. On seed 0's scenes it cuts the heuristics' falls at N = 8..14 by 82-85 % and
-sorts 2-4 more of 60 episodes at N = 3..5 (`results/closed_loop_seed0/`).
+lists what it did. With ``safe_picks=True`` as well (the setting to use for the fewest falls) it
+cuts the episodes with a fall at N = 8..14 by 76 % (H-a), 75 % (H-d) and 60 % (the shipped P+S)
+and sorts more at N = 3..5, on issue 10's YCB grid (`results/closed_loop/on_deeper_safe_table.md`).
+It stays off by default: the paper's task is open loop (issue 10's evaluation and the shipped
+models), and watching costs 1.5-3x the time per action (`benchmarks/closed_loop.py`).
 
 ``safe_picks=True`` (off by default): `action_masks` leaves out the picks whose object would be
 carried out of the opening through a taller visible neighbour (`shelf_env.clearance`), the motion
