@@ -12,7 +12,8 @@
 # episode of it costs ~4x a heuristic's). NAME (default on_deeper) names the closed-loop folder and
 # WATCH (JSON, default the watch's defaults) its DragWatch fields; SAFE=1 adds --safe-picks to the
 # closed-loop runs (not to the open-loop ones). Writes NAME_table.md (H-a, H-d),
-# NAME_table_p_s.md (P+S on its seeds) and the NAME_*.png plots.
+# NAME_table_p_s.md (P+S on its seeds), NAME_table_p_s_vs_heuristics.md (all three on P+S's
+# seeds) and the NAME_*.png plots.
 # The committed folders: on (WATCH='{"place_check": false}', the defaults before the place check; its
 # tables and plots are table.md, table_p_s.md and fell_rate / sr / loop_rate.png) and on_deeper_safe
 # (the defaults with safe picks, issue 13's recommended setting: SAFE=1 NAME=on_deeper_safe
@@ -47,6 +48,9 @@ python scripts/closed_loop_table.py results/closed_loop/off "$out" --policies h-
 if [ "${#policies[@]}" = 3 ]; then
   python scripts/closed_loop_table.py results/closed_loop/off "$out" --policies p_s --seeds $(seq 0 $((ps_seeds - 1))) \
       --out "results/closed_loop/${name}_table_p_s.md"
+  # P+S beside the heuristics on the same seeds (its seeds), both loops
+  python scripts/closed_loop_table.py results/closed_loop/off "$out" --policies h-a h-d p_s \
+      --seeds $(seq 0 $((ps_seeds - 1))) --out "results/closed_loop/${name}_table_p_s_vs_heuristics.md"
 fi
 for metric in fell_rate sr loop_rate; do
   python examples/plot_conditions.py --metric $metric --x n --runs results/closed_loop/off:off \
