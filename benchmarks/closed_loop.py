@@ -19,11 +19,10 @@ import argparse
 import time
 
 import gymnasium as gym
-import numpy as np
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from shelf_env import params
-from shelf_env.evaluation import make_env, make_policy, scene_seed, takes_action_masks
+from shelf_env.evaluation import make_env, make_policy, run_episode, scene_seed
 
 CONDITIONS: dict[str, dict] = {
     "open": {},
@@ -32,20 +31,19 @@ CONDITIONS: dict[str, dict] = {
 }
 
 
-def play(env: gym.Env, policy, reset_seed: int) -> tuple[int, float]:
-    """One greedy episode: (actions, seconds spent in env.step)."""
-    obs, _ = env.reset(seed=reset_seed)
-    masked = takes_action_masks(policy)
-    stepping, actions = 0.0, 0
-    while True:
-        kwargs = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
-        action, _ = policy.predict(obs, deterministic=True, **kwargs)
+class StepTimer(gym.Wrapper):
+    """Adds up the wall time spent in ``env.step`` (the policy's own choice is not timed)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.seconds = 0.0
+
+    def step(self, action):
         t = time.perf_counter()
-        obs, _, terminated, truncated, _ = env.step(int(np.asarray(action).reshape(-1)[0]))
-        stepping += time.perf_counter() - t
-        actions += 1
-        if terminated or truncated:
-            return actions, stepping
+        try:
+            return self.env.step(action)
+        finally:
+            self.seconds += time.perf_counter() - t
 
 
 def main() -> None:
@@ -63,15 +61,15 @@ def main() -> None:
     print(f"{'N':>3} {'condition':>12} {'ms/action':>10} {'actions/ep':>11} {'s/episode':>10} "
           f"{'x action':>9} {'x episode':>10}")
     for n in ns:
-        envs = {name: make_env(args.policy, n, "ycb", conditions=cond) for name, cond in CONDITIONS.items()}
+        envs = {name: StepTimer(make_env(args.policy, n, "ycb", conditions=cond))
+                for name, cond in CONDITIONS.items()}
         policies = {name: make_policy(args.policy, env) for name, env in envs.items()}
         totals = {name: [0, 0.0] for name in CONDITIONS}
         for run in range(args.scenes):
-            for name in CONDITIONS:
-                actions, seconds = play(envs[name], policies[name], scene_seed(args.seed, n, run))
-                totals[name][0] += actions
-                totals[name][1] += seconds
-        for env in envs.values():
+            for name, env in envs.items():
+                totals[name][0] += run_episode(env, policies[name], scene_seed(args.seed, n, run))["actions"]
+        for name, env in envs.items():
+            totals[name][1] = env.seconds
             env.close()
         base_action = totals["open"][1] / totals["open"][0]
         base_episode = totals["open"][1] / args.scenes

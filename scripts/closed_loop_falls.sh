@@ -46,11 +46,12 @@ shelf-evaluate --policies "${policies[@]}" "${grid[@]}" --seeds 3 "${loop[@]}" -
 python scripts/closed_loop_table.py results/closed_loop/off "$out" --policies h-a h-d \
     --out "results/closed_loop/${name}_table.md"
 if [ "${#policies[@]}" = 3 ]; then
-  python scripts/closed_loop_table.py results/closed_loop/off "$out" --policies p_s --seeds $(seq 0 $((ps_seeds - 1))) \
+  mapfile -t ps_seed_list < <(seq 0 $((ps_seeds - 1)))
+  python scripts/closed_loop_table.py results/closed_loop/off "$out" --policies p_s --seeds "${ps_seed_list[@]}" \
       --out "results/closed_loop/${name}_table_p_s.md"
   # P+S beside the heuristics on the same seeds (its seeds), both loops
   python scripts/closed_loop_table.py results/closed_loop/off "$out" --policies h-a h-d p_s \
-      --seeds $(seq 0 $((ps_seeds - 1))) --out "results/closed_loop/${name}_table_p_s_vs_heuristics.md"
+      --seeds "${ps_seed_list[@]}" --out "results/closed_loop/${name}_table_p_s_vs_heuristics.md"
 fi
 for metric in fell_rate sr loop_rate; do
   python examples/plot_conditions.py --metric $metric --x n --runs results/closed_loop/off:off \
