@@ -130,11 +130,15 @@ def run(policy: str, n: int, seed: int, object_set: str, out: pathlib.Path, max_
         frames: list[np.ndarray] = []
         log(f"{label} on a held-out scene ({n} {object_set} objects, seed {seed}), "
             f"{info['num_unsorted_initial']} not in their region")
-        done = False
+        done, first = False, True
         while not done:
             scene = np.asarray(env.render())  # what the camera saw: the frame shows the state the policy acted on
             allowed = action_masks()
-            action, _ = agent.predict(obs, deterministic=True, **({"action_masks": allowed} if masked else {}))
+            kwargs: dict[str, Any] = {"action_masks": allowed} if masked else {}
+            if ev.predict_takes(agent, "episode_start"):
+                kwargs["episode_start"] = np.array([first])
+            action, _ = agent.predict(obs, deterministic=True, **kwargs)
+            first = False
             action = int(np.asarray(action).reshape(-1)[0])
             q = q_of(obs) if q_of is not None else None
             name, row, col = codec.decode(action)

@@ -10,8 +10,11 @@ standard deviation of the per-seed values over seeds (Fig. 10).
 
 Policies are named by a string: ``"h-d"``, ``"h-a"``, ``"random"``, the privileged diagnostics
 ``"h-d-lookahead"`` and ``"h-a-lookahead"`` (`shelf_env.lookahead`) or the path of a
-`PixelDoubleDQN` zip (P+S or S; the env layout follows the checkpoint). `check_policy` validates a
-name before any work starts.
+`PixelDoubleDQN` zip (P+S or S; the env layout follows the checkpoint). Any of them with
+`LOOP_BREAKER` appended (``"examples/pretrained/p_s.zip+loop-breaker"``, ``"h-a+loop-breaker"``)
+is played under `sb3_pixeldqn.loop_breaker.LoopBreaker` (its defaults), with cells of its own
+(labels ``p_s+loop-breaker``, ``h-a+loop-breaker``). `check_policy` validates a name before any
+work starts.
 """
 
 from __future__ import annotations
@@ -44,6 +47,8 @@ HEURISTICS = {"h-d": DistanceHeuristic, "h-a": AccessibilityHeuristic,
 #: run, greedy curriculum check or tuning probe draws scenes from it.
 HELDOUT_SEED = 1000
 NAMED_POLICIES = (*HEURISTICS, "random")
+#: Appended to a checkpoint's path: play it under `sb3_pixeldqn.loop_breaker.LoopBreaker`.
+LOOP_BREAKER = "+loop-breaker"
 
 
 @dataclass(frozen=True)
@@ -108,9 +113,23 @@ def scene_seed(seed: int, num_objects: int, run: int) -> int:
     return int(np.random.SeedSequence([seed, num_objects, run]).generate_state(1)[0])
 
 
+def policy_file(policy: str) -> str:
+    """The checkpoint path (or the name) of ``policy``, without `LOOP_BREAKER`."""
+    return policy[:-len(LOOP_BREAKER)] if policy.endswith(LOOP_BREAKER) else policy
+
+
+def is_named(policy: str) -> bool:
+    """Whether ``policy`` is one of `NAMED_POLICIES` (under a loop breaker or not), not a checkpoint."""
+    return policy_file(policy) in NAMED_POLICIES
+
+
 def policy_label(policy: str) -> str:
-    """Short name used in files and plots: the name itself, or a checkpoint's file stem."""
-    return policy if policy in NAMED_POLICIES else pathlib.Path(policy).stem
+    """Short name used in files and plots: the name itself, or a checkpoint's file stem (with
+    `LOOP_BREAKER` where it is played under one)."""
+    if is_named(policy):
+        return policy
+    suffix = LOOP_BREAKER if policy.endswith(LOOP_BREAKER) else ""
+    return pathlib.Path(policy_file(policy)).stem + suffix
 
 
 def checkpoint_primitives(path: str | os.PathLike) -> tuple[str, ...]:
@@ -140,14 +159,14 @@ def checkpoint_pixel_size(path: str | os.PathLike) -> float:
 
 def policy_pixel_size(policy: str) -> float:
     """Cell size of the env a policy acts in: the checkpoint's, or the env default for named policies."""
-    return params.PIXEL_SIZE if policy in NAMED_POLICIES else checkpoint_pixel_size(policy)
+    return params.PIXEL_SIZE if is_named(policy) else checkpoint_pixel_size(policy_file(policy))
 
 
 def check_policy(policy: str, primitives: tuple[str, ...] | None = None) -> tuple[str, ...]:
     """Validate a policy name (and a forced layout) before work starts; returns the env primitives."""
-    if policy in NAMED_POLICIES:
+    if is_named(policy):
         return primitives or ("pick", "push")
-    needed = checkpoint_primitives(policy)
+    needed = checkpoint_primitives(policy_file(policy))
     if primitives is not None and tuple(primitives) != needed:
         raise ValueError(
             f"checkpoint {policy} was trained with primitives {needed} but the evaluation env has {tuple(primitives)}"
@@ -163,24 +182,36 @@ def check_ns(ns: list[int], max_objects: int = params.MAX_OBJECTS) -> list[int]:
 
 
 def make_policy(policy: str, env: gym.Env, seed: int = 0) -> Any:
-    """An object with SB3's ``predict`` for ``policy`` acting in ``env``."""
-    if policy in HEURISTICS:
-        return HEURISTICS[policy](env)
-    if policy == "random":
-        return RandomPolicy(env, seed=seed)
-    from sb3_pixeldqn import PixelDoubleDQN
+    """An object with SB3's ``predict`` for ``policy`` acting in ``env`` (under a `LoopBreaker`
+    where ``policy`` ends with `LOOP_BREAKER`)."""
+    name = policy_file(policy)
+    agent: Any
+    if name in HEURISTICS:
+        agent = HEURISTICS[name](env)
+    elif name == "random":
+        agent = RandomPolicy(env, seed=seed)
+    else:
+        from sb3_pixeldqn import PixelDoubleDQN
 
-    return PixelDoubleDQN.load(policy, env=env, device="cpu")
+        agent = PixelDoubleDQN.load(name, env=env, device="cpu")
+    if policy.endswith(LOOP_BREAKER):
+        from sb3_pixeldqn.loop_breaker import LoopBreaker
+
+        return LoopBreaker(agent)
+    return agent
 
 
 def takes_action_masks(policy: Any) -> bool:
     """Whether ``policy`` acts with sb3-contrib's ``action_masks=``: its ``predict`` accepts them (a
     PixelDoubleDQN does) and it ``acts_masked`` (False for a model trained with ``masked=False``,
     which keeps the paper's all-pixel argmax at evaluation)."""
-    if not getattr(policy, "acts_masked", True):
-        return False
+    return bool(getattr(policy, "acts_masked", True)) and predict_takes(policy, "action_masks")
+
+
+def predict_takes(policy: Any, name: str) -> bool:
+    """Whether ``policy.predict`` has a parameter ``name``."""
     try:
-        return "action_masks" in inspect.signature(policy.predict).parameters
+        return name in inspect.signature(policy.predict).parameters
     except (TypeError, ValueError):
         return False
 
@@ -190,16 +221,20 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
 
     A policy whose ``predict`` takes ``action_masks`` gets the env's masks at every step, as a
     MaskablePPO evaluation does, unless it was trained with ``masked=False``; the heuristics choose
-    among object cells by construction. A policy with a ``stats`` dict of counters gets the
-    episode's increments recorded (``policy_stats``).
+    among object cells by construction. A policy whose ``predict`` takes SB3's ``episode_start``
+    gets it (True at the first step): a policy with memory (a `LoopBreaker`) forgets the last
+    episode there. A policy with a
+    ``stats`` dict of counters gets the episode's increments recorded (``policy_stats``).
     """
     stats_before = dict(getattr(policy, "stats", None) or {})
     obs, info = env.reset(seed=reset_seed)
     unsorted = info["num_unsorted_initial"]
-    masked = takes_action_masks(policy)
+    masked, starts = takes_action_masks(policy), predict_takes(policy, "episode_start")
     noops, repeat, max_repeat, last = 0, 0, 0, None
     while True:
-        kwargs = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
+        kwargs: dict[str, Any] = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
+        if starts:
+            kwargs["episode_start"] = np.array([last is None])
         action, _ = policy.predict(obs, deterministic=True, **kwargs)
         action = int(np.asarray(action).reshape(-1)[0])
         next_obs, _, terminated, truncated, info = env.step(action)
@@ -388,13 +423,13 @@ def check_cell_owner(out: pathlib.Path, policies: list[str], record: bool = Fals
     checkpoint's sha256 beside its cells (before the first cell is written)."""
     seen: dict[str, str] = {}
     for policy in policies:
-        if policy in NAMED_POLICIES:
+        if is_named(policy):
             continue
         label = policy_label(policy)
         if seen.setdefault(label, policy) != policy:
             raise ValueError(f"checkpoints {seen[label]} and {policy} share the label {label!r} (the file stem) "
                              "that names their cells: rename one")
-        digest = hashlib.sha256(pathlib.Path(policy).read_bytes()).hexdigest()
+        digest = hashlib.sha256(pathlib.Path(policy_file(policy)).read_bytes()).hexdigest()
         path = fingerprint_path(out, policy)
         if path.exists():
             before = path.read_text().strip()

@@ -6,6 +6,13 @@ observation — the recoloured heightmap — so they face the same partial obser
 learned policy. They expose SB3's ``predict(obs, state, episode_start, deterministic)`` so that
 one evaluation loop runs every policy.
 
+They also take sb3-contrib's ``action_masks`` (``acts_masked`` is False: an evaluation does not pass
+them the env's masks, and they keep choosing among their own candidates). Masks come from a
+`sb3_pixeldqn.loop_breaker.LoopBreaker` (``"h-d+loop-breaker"`` in `shelf_env.evaluation`). H-d and
+H-a then choose among the allowed cells of their candidates. Where no allowed cell is left, they
+choose as they would unmasked (when every visible object is sorted, that means the allowed
+graspable cells). The random policy draws among the allowed actions.
+
 What they read from the observation (`ObservationView`): the class of each visible object cell
 (its colour), the visible objects (connected blobs of one class colour), each class's target
 region (the bounding box of its visible tint — regions are rectangles, and objects standing in a
@@ -90,6 +97,14 @@ class ObservationView:
         if (clear & ~self.sorted_cells).any():
             self.graspable = clear
 
+    def restrict_to_allowed(self, picks: np.ndarray) -> None:
+        """Keep only the graspable cells whose pick ``picks`` ((H, W) bool) allows: where an unsorted
+        object keeps one, or where no object is unsorted and some cell is kept. Otherwise
+        unchanged (see the module docstring)."""
+        kept = self.graspable & picks
+        if (kept & ~self.sorted_cells).any() or (kept.any() and not (self.graspable & ~self.sorted_cells).any()):
+            self.graspable = kept
+
     def distance_to_region(self) -> np.ndarray:
         """(H, W) distance in cells from each object cell to its class's region rectangle (0 inside).
 
@@ -149,6 +164,9 @@ class ObservationPolicy:
 
     observation_space: gym.spaces.Box
     action_space: gym.spaces.Discrete
+    #: An evaluation passes no env masks (`shelf_env.evaluation.takes_action_masks`); masks given
+    #: explicitly (a LoopBreaker's) restrict the choice (see the module docstring).
+    acts_masked = False
 
     def predict(
         self,
@@ -156,16 +174,28 @@ class ObservationPolicy:
         state: tuple | None = None,
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
+        action_masks: np.ndarray | None = None,
     ) -> tuple[np.ndarray, None]:
         obs = np.asarray(observation)
         shape = self.observation_space.shape
+        n_actions = int(self.action_space.n)
         if obs.shape == shape:
-            return np.array(self._act(obs)), None
-        if obs.ndim == 4 and obs.shape[1:] == shape:
-            return np.array([self._act(o) for o in obs]), None
-        raise ValueError(f"{type(self).__name__}: observation shape {obs.shape} is not {shape} or (n, *{shape})")
+            batch = obs[None]
+        elif obs.ndim == 4 and obs.shape[1:] == shape:
+            batch = obs
+        else:
+            raise ValueError(f"{type(self).__name__}: observation shape {obs.shape} is not {shape} or (n, *{shape})")
+        masks: list[np.ndarray | None] = [None] * len(batch)
+        if action_masks is not None:
+            allowed = np.asarray(action_masks, dtype=bool)
+            if allowed.size != len(batch) * n_actions:
+                raise ValueError(f"{type(self).__name__}: action_masks has {allowed.size} entries; expected "
+                                 f"{len(batch)} x {n_actions}")
+            masks = list(allowed.reshape(len(batch), n_actions))
+        actions = [self._act(o, m) for o, m in zip(batch, masks)]
+        return (np.array(actions[0]) if obs.shape == shape else np.array(actions)), None
 
-    def _act(self, obs: np.ndarray) -> int:
+    def _act(self, obs: np.ndarray, allowed: np.ndarray | None = None) -> int:
         raise NotImplementedError
 
 
@@ -192,10 +222,12 @@ class PickHeuristic(ObservationPolicy):
     def _pick(self, row: int, col: int) -> int:
         return self.codec.encode("pick", int(row), int(col))
 
-    def _act(self, obs: np.ndarray) -> int:
+    def _act(self, obs: np.ndarray, allowed: np.ndarray | None = None) -> int:
         view = ObservationView.from_observation(obs, self.margin_cells)
         if self.safe_picks:
             view.restrict_to_clear_carries(obs, self.pixel_size, self.detour_reach)
+        if allowed is not None:
+            view.restrict_to_allowed(allowed.reshape(-1, self.rows, self.cols)[self.codec.map_index("pick")])
         if not view.graspable.any():  # nothing visible: pick the middle of the floor (a no-op probe)
             return self._pick(self.rows // 2, self.cols // 2)
         return self.act_on(view, obs)
@@ -263,5 +295,7 @@ class RandomPolicy(ObservationPolicy):
         self.observation_space = env.observation_space
         self.rng = np.random.default_rng(seed)
 
-    def _act(self, obs: np.ndarray) -> int:
+    def _act(self, obs: np.ndarray, allowed: np.ndarray | None = None) -> int:
+        if allowed is not None and allowed.any():
+            return int(self.rng.choice(np.flatnonzero(allowed)))
         return int(self.rng.integers(int(self.action_space.n)))

@@ -147,9 +147,9 @@ class LookaheadHeuristic(PickHeuristic):
         self._probed: list[tuple[int, Outcome]] = []  # the last decision's probes
         self._taken: int | None = None  # and its action
 
-    def _act(self, obs: np.ndarray) -> int:
+    def _act(self, obs: np.ndarray, allowed: np.ndarray | None = None) -> int:
         self._probed = []
-        self._taken = super()._act(obs)
+        self._taken = super()._act(obs, allowed)
         return self._taken
 
     def counterfactuals(self) -> list[tuple[int, float, np.ndarray]]:

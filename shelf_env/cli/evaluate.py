@@ -90,7 +90,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="shelf-evaluate", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--policies", nargs="+", required=True, help="h-d, h-a, random, h-d-lookahead, h-a-lookahead "
-                                                                 "or checkpoint .zip paths")
+                                                                 "or checkpoint .zip paths; any of them+loop-breaker: "
+                                                                 "played under sb3_pixeldqn's LoopBreaker")
     p.add_argument("--ns", type=parse_ns, default=list(range(3, 15)), help="e.g. 3-14 or 3,5,8")
     p.add_argument("--runs", type=int, default=100, help="episodes per (policy, N, seed) (paper: 100)")
     p.add_argument("--seeds", type=int, default=5, help="number of seeds, 0..S-1 (paper: 5)")
@@ -171,9 +172,10 @@ def _ray_cell(policy: str, checkpoint: bytes | None, n: int, seed: int, runs: in
     if checkpoint is None:
         return ev.evaluate_cell(policy, n, seed, runs, object_set, conditions=conditions)
     with tempfile.TemporaryDirectory() as tmp:
-        local = pathlib.Path(tmp) / pathlib.Path(policy).name
+        local = pathlib.Path(tmp) / pathlib.Path(ev.policy_file(policy)).name
         local.write_bytes(checkpoint)
-        return ev.evaluate_cell(str(local), n, seed, runs, object_set, conditions=conditions)
+        return ev.evaluate_cell(str(local) + policy[len(ev.policy_file(policy)):], n, seed, runs, object_set,
+                                conditions=conditions)
 
 
 def run_ray(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, workers: int, address: str | None,
@@ -189,8 +191,8 @@ def run_ray(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, workers:
     except Exception as err:  # noqa: BLE001  (Ray raises several types for an unusable cluster)
         raise ValueError(f"cannot start or reach Ray ({address or 'local'}): {err}") from err
     cell = ray.remote(num_cpus=1)(_ray_cell)
-    blobs: dict[str, Any] = {p: ray.put(pathlib.Path(p).read_bytes())
-                             for p in {job[0] for job in todo} if p not in ev.NAMED_POLICIES}
+    blobs: dict[str, Any] = {p: ray.put(pathlib.Path(ev.policy_file(p)).read_bytes())
+                             for p in {job[0] for job in todo} if not ev.is_named(p)}
     pending = {cell.remote(p, blobs.get(p), n, s, runs, o, conditions): (p, n, s, o) for p, n, s, o in todo}
     with tqdm(total=len(pending), desc="cells (ray)", unit="cell") as bar:
         while pending:
@@ -221,7 +223,7 @@ def reuse_cells(source: pathlib.Path, todo: list[Job], paths: dict[Job, pathlib.
     copied = 0
     for job in todo:
         cell = source / "cells" / paths[job].name
-        if cell.exists() and (job[0] in ev.NAMED_POLICIES or ev.fingerprint_path(source, job[0]).exists()):
+        if cell.exists() and (ev.is_named(job[0]) or ev.fingerprint_path(source, job[0]).exists()):
             copy_atomically(cell, paths[job])
             copied += 1
     return copied
