@@ -143,7 +143,7 @@ def test_the_evaluation_plays_a_checkpoint_under_a_loop_breaker(tmp_path):
     finally:
         env.close()
     assert together[1] == alone  # the first episode's bans were forgotten at the second's start
-    assert unbroken["max_repeat"] == unbroken["actions"] == 40  # one cell, 40 times
+    assert unbroken["max_repeat"] >= 2 * ev.LOOP_REPEAT  # one cell again and again (40 times here)
     assert alone["max_repeat"] <= agent.max_visits and alone["policy_stats"]["bans"] >= 1
 
 
