@@ -40,6 +40,14 @@ import numpy as np
 from gymnasium import spaces
 
 
+def predict_takes(policy: Any, name: str) -> bool:
+    """Whether ``policy.predict`` has a parameter ``name`` (e.g. ``"action_masks"``, ``"episode_start"``)."""
+    try:
+        return name in inspect.signature(policy.predict).parameters
+    except (AttributeError, TypeError, ValueError):
+        return False
+
+
 class LoopBreaker:
     """Wrap ``policy`` (see the module docstring); ``predict`` has SB3's signature with ``action_masks``.
 
@@ -65,11 +73,7 @@ class LoopBreaker:
         if int(action_space.n) % (height * width):
             raise ValueError(f"{type(policy).__name__}'s {action_space.n} actions are not whole {height}x{width} "
                              f"maps of its observation")
-        try:
-            takes_masks = "action_masks" in inspect.signature(policy.predict).parameters
-        except (AttributeError, TypeError, ValueError):
-            takes_masks = False
-        if not takes_masks:
+        if not predict_takes(policy, "action_masks"):
             raise ValueError(f"LoopBreaker steers a policy through action_masks; {type(policy).__name__}.predict "
                              "takes none")
         self.policy = policy
@@ -151,7 +155,6 @@ class LoopBreaker:
             actions = flat.reshape(np.shape(actions)).astype(np.asarray(actions).dtype)
         for i, action in enumerate(flat.tolist()):
             m, rest = divmod(action, self._layout[1] * self._layout[2])
-            before = int(self._banned(self._visits[i]).sum())
             self._visits[i][m, rest // self._layout[2], rest % self._layout[2]] += 1
-            self.stats["bans"] += int(self._banned(self._visits[i]).sum()) - before
+            self.stats["bans"] += int(self._banned(self._visits[i]).sum()) - int(banned[i].sum())
         return actions, new_state

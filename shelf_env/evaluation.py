@@ -22,7 +22,6 @@ from __future__ import annotations
 import csv
 import functools
 import hashlib
-import inspect
 import json
 import math
 import os
@@ -36,6 +35,7 @@ import numpy as np
 
 from sb3_pixeldqn.buffers import unchanged
 from sb3_pixeldqn.files import write_atomically, write_json_atomically
+from sb3_pixeldqn.loop_breaker import LoopBreaker, predict_takes
 from shelf_env import params
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
 from shelf_env.lookahead import LookaheadAccessibility, LookaheadDistance
@@ -194,11 +194,7 @@ def make_policy(policy: str, env: gym.Env, seed: int = 0) -> Any:
         from sb3_pixeldqn import PixelDoubleDQN
 
         agent = PixelDoubleDQN.load(name, env=env, device="cpu")
-    if policy.endswith(LOOP_BREAKER):
-        from sb3_pixeldqn.loop_breaker import LoopBreaker
-
-        return LoopBreaker(agent)
-    return agent
+    return LoopBreaker(agent) if policy.endswith(LOOP_BREAKER) else agent
 
 
 def takes_action_masks(policy: Any) -> bool:
@@ -206,14 +202,6 @@ def takes_action_masks(policy: Any) -> bool:
     PixelDoubleDQN does) and it ``acts_masked`` (False for a model trained with ``masked=False``,
     which keeps the paper's all-pixel argmax at evaluation)."""
     return bool(getattr(policy, "acts_masked", True)) and predict_takes(policy, "action_masks")
-
-
-def predict_takes(policy: Any, name: str) -> bool:
-    """Whether ``policy.predict`` has a parameter ``name``."""
-    try:
-        return name in inspect.signature(policy.predict).parameters
-    except (TypeError, ValueError):
-        return False
 
 
 def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = params.MAX_ACTIONS) -> dict:
