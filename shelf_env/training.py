@@ -39,6 +39,7 @@ from shelf_env.actions import PRIMITIVES, ActionCodec
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
 from shelf_env.lookahead import FallGuard, LookaheadAccessibility, LookaheadDistance, LookaheadHeuristic
 from shelf_env.objects import OBJECT_SETS
+from shelf_env.robot import DragWatch
 from shelf_env.symmetry import MirrorWidth, PermuteClasses
 
 DEMO_POLICIES = {"h-a": AccessibilityHeuristic, "h-d": DistanceHeuristic,
@@ -58,6 +59,9 @@ class TrainConfig:
     object_set: str = "train"
     # the env's safe_picks (shelf_env.clearance): the mask leaves out picks whose carry is blocked
     safe_picks: bool = False
+    # the env's closed_loop (shelf_env.robot.DragWatch): False (open loop, the paper's), true (the
+    # watch's defaults) or a dict of DragWatch fields; the training, check and demonstration envs
+    closed_loop: bool | dict[str, Any] = False
     # lever 1: one action mask everywhere (False: the paper's all-pixel argmax)
     masked: bool = True
     masked_exploration: bool = True
@@ -150,6 +154,13 @@ class TrainConfig:
                              f"or None, got {self.guard!r}")
         if not isinstance(self.safe_picks, bool):
             raise ValueError(f"TrainConfig.safe_picks must be true or false, got {self.safe_picks!r}")
+        if not isinstance(self.closed_loop, (bool, dict)):  # JSON-able: no DragWatch objects
+            raise ValueError("TrainConfig.closed_loop must be true, false or a dict of DragWatch fields, got "
+                             f"{self.closed_loop!r}")
+        try:
+            DragWatch.from_any(self.closed_loop)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"TrainConfig.closed_loop: {err}") from err
         names = self.primitives
         if not names or len(set(names)) != len(names) or not set(names) <= set(PRIMITIVES):
             raise ValueError(f"TrainConfig.primitives must be distinct names from {PRIMITIVES}, got {names}")
@@ -230,7 +241,7 @@ def make_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any)
     """A ShelfSort-v0 env with the config's layout, cell size and object set."""
     return gym.make("ShelfSort-v0", num_objects=num_objects or config.start_objects, object_set=config.object_set,
                     primitives=config.primitives, pixel_size=config.pixel_size, safe_picks=config.safe_picks,
-                    **kwargs)
+                    closed_loop=config.closed_loop, **kwargs)
 
 
 def make_training_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any) -> gym.Env:

@@ -48,7 +48,7 @@ MODEL_KEYS = ("learning_rate", "buffer_size", "learning_starts", "batch_size", "
               "target_update_interval", "exploration_initial_eps", "exploration_final_eps", "exploration_timesteps",
               "masked", "masked_exploration", "demo_fraction", "margin", "margin_weight")
 #: TrainConfig fields that go to the env (as ``env_kwargs``).
-ENV_KEYS = ("object_set", "primitives", "pixel_size", "safe_picks")
+ENV_KEYS = ("object_set", "primitives", "pixel_size", "safe_picks", "closed_loop")
 
 
 def register() -> None:
