@@ -26,6 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 from sb3_pixeldqn.files import write_atomically
+from sb3_pixeldqn.loop_breaker import LoopBreaker
 from shelf_env import evaluation as ev
 from shelf_env import params
 from shelf_env.actions import ActionCodec
@@ -113,6 +114,14 @@ def frame(scene: np.ndarray, obs: np.ndarray, q: np.ndarray | None, allowed: np.
     return np.concatenate([bar, body], axis=0)
 
 
+def q_map_values_of(agent: Any) -> Any:
+    """The Q-map function (``obs -> (maps, rows, cols)``) of a checkpoint's network, looked up through
+    a `LoopBreaker` (which wraps the model: the overlay shows the model's own values, and the marked
+    cell is what the breaker let it do); None for a heuristic."""
+    inner = agent.policy if isinstance(agent, LoopBreaker) else agent
+    return getattr(getattr(inner, "policy", None), "q_map_values", None)
+
+
 def run(policy: str, n: int, seed: int, object_set: str, out: pathlib.Path, max_actions: int = params.MAX_ACTIONS,
         log: Any = print) -> dict[str, Any]:
     """Play one held-out scene with ``policy`` and write the GIF; returns the outcome."""
@@ -124,7 +133,7 @@ def run(policy: str, n: int, seed: int, object_set: str, out: pathlib.Path, max_
         action_masks = env.get_wrapper_attr("action_masks")
         agent = ev.make_policy(policy, env, seed=seed)
         masked = ev.takes_action_masks(agent)
-        q_of = getattr(getattr(agent, "policy", None), "q_map_values", None)
+        q_of = q_map_values_of(agent)
         obs, info = env.reset(seed=ev.scene_seed(ev.HELDOUT_SEED, n, seed))
         label = ev.policy_label(policy)
         frames: list[np.ndarray] = []

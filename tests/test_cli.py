@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib.metadata
 import shutil
 
+import numpy as np
 import pytest
 from PIL import Image
 
@@ -55,6 +56,24 @@ def test_demo_writes_a_gif_of_the_episode(tmp_path, capsys):
     actions = printed.count("  action ")
     assert gif.n_frames == actions + 1 and gif.size == (3 * demo.PANEL[0], demo.PANEL[1] + 26)
     assert [p.name for p in tmp_path.iterdir()] == ["d.gif"]
+
+
+def test_demo_overlays_the_model_q_maps_under_the_loop_breaker():
+    import gymnasium as gym
+
+    from sb3_pixeldqn import LoopBreaker
+    from shelf_env import evaluation as ev
+
+    name = "examples/pretrained/p_s.zip"
+    env = gym.make("ShelfSort-v0", num_objects=2, pixel_size=ev.policy_pixel_size(name))
+    obs, _ = env.reset(seed=0)
+    bare, wrapped = ev.make_policy(name, env), ev.make_policy(name + ev.LOOP_BREAKER, env)
+    assert isinstance(wrapped, LoopBreaker)
+    q_bare, q_wrapped = demo.q_map_values_of(bare)(obs), demo.q_map_values_of(wrapped)(obs)
+    assert q_wrapped.shape == (3, 40, 60)  # pick, push right, push left at 1 cm cells
+    np.testing.assert_allclose(q_wrapped, q_bare)  # the same weights, read through the breaker
+    assert demo.q_map_values_of(ev.make_policy("h-d", env)) is None
+    env.close()
 
 
 def test_demo_defaults_to_a_committed_checkpoint():
