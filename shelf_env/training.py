@@ -36,10 +36,10 @@ from sb3_pixeldqn.buffers import NOOP_MODES, RELABEL_MODES
 from sb3_pixeldqn.callbacks import GATES
 from shelf_env import params
 from shelf_env.actions import PRIMITIVES, ActionCodec
+from shelf_env.evaluation import check_conditions
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
 from shelf_env.lookahead import FallGuard, LookaheadAccessibility, LookaheadDistance, LookaheadHeuristic
 from shelf_env.objects import OBJECT_SETS
-from shelf_env.robot import DragWatch
 from shelf_env.symmetry import MirrorWidth, PermuteClasses
 
 DEMO_POLICIES = {"h-a": AccessibilityHeuristic, "h-d": DistanceHeuristic,
@@ -154,11 +154,8 @@ class TrainConfig:
                              f"or None, got {self.guard!r}")
         if not isinstance(self.safe_picks, bool):
             raise ValueError(f"TrainConfig.safe_picks must be true or false, got {self.safe_picks!r}")
-        if not isinstance(self.closed_loop, (bool, dict)):  # JSON-able: no DragWatch objects
-            raise ValueError("TrainConfig.closed_loop must be true, false or a dict of DragWatch fields, got "
-                             f"{self.closed_loop!r}")
-        try:
-            DragWatch.from_any(self.closed_loop)
+        try:  # the evaluation's own check of the env option (JSON-able: no DragWatch objects)
+            check_conditions({"closed_loop": self.closed_loop})
         except (TypeError, ValueError) as err:
             raise ValueError(f"TrainConfig.closed_loop: {err}") from err
         names = self.primitives

@@ -239,11 +239,14 @@ def test_safe_picks_reaches_the_training_and_check_envs_and_the_zoo_file():
 def test_closed_loop_reaches_the_training_and_check_envs_and_the_zoo_file():
     from shelf_env.zoo import ENV_ID, zoo_hyperparams
 
-    assert make_env(PRESETS["p_s"]).unwrapped.drag_watch is None  # open loop by default, as in the paper
+    open_env, default_env = make_env(PRESETS["p_s"]), make_env(PRESETS["p_s"].replace(closed_loop=True))
+    assert open_env.unwrapped.drag_watch is None  # open loop by default, as in the paper
     config = PRESETS["p_s"].replace(closed_loop={"stacked": "put back"}, safe_picks=True)
     env = make_env(config)
     assert env.unwrapped.drag_watch is not None and env.unwrapped.drag_watch.stacked == "put back"
-    assert make_env(PRESETS["p_s"].replace(closed_loop=True)).unwrapped.drag_watch.stacked == "deeper"
+    assert default_env.unwrapped.drag_watch.stacked == "deeper"
+    open_env.close()
+    default_env.close()
     assert zoo_hyperparams(config)[ENV_ID]["env_kwargs"]["closed_loop"] == {"stacked": "put back"}
     assert TrainConfig.from_dict(config.to_dict()).closed_loop == {"stacked": "put back"}
     with pytest.raises(ValueError, match="closed_loop.*unknown closed_loop keys"):
