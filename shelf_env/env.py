@@ -52,6 +52,13 @@ models), and watching costs 1.5-3x the time per action (`benchmarks/closed_loop.
 carried out of the opening through a taller visible neighbour (`shelf_env.clearance`), the motion
 that drags most fallen objects out; the heuristics restrict their picks the same way.
 
+``min_num_objects=k`` (None by default): each reset draws N uniformly from
+[min(k, num_objects), num_objects] (`ShelfSortEnv.episode_size`, from the env's seeded stream)
+instead of always playing ``num_objects``, which a curriculum (`set_num_objects`) then moves as
+the upper end: training on a mix of sizes so that the low N are not forgotten at a high stage
+(`shelf_env.training.TrainConfig.min_num_objects`). ``info["num_objects"]`` gives each
+episode's N.
+
 ``sleeping=True`` (default) lets objects at rest sleep in Bullet between contacts, which makes
 actions cheaper with many objects (`benchmarks/sleeping.py`); ``sleeping=False`` simulates every object at every physics
 step (see `shelf_env.world`).
@@ -99,6 +106,7 @@ class ShelfSortEnv(gym.Env):
     _noise_rng: np.random.Generator | None
     max_objects: int
     num_objects: int
+    min_num_objects: int | None
     object_set: str
     primitives: tuple[str, ...]
     map_names: list[str]
@@ -137,6 +145,7 @@ class ShelfSortEnv(gym.Env):
         closed_loop: bool | dict[str, Any] | DragWatch = False,
         physics: str | Physics = "fast",
         safe_picks: bool = False,
+        min_num_objects: int | None = None,
     ) -> None:
         if object_set not in OBJECT_SETS:
             raise ValueError(f"unknown object_set {object_set!r}; expected one of {OBJECT_SETS}")
@@ -163,6 +172,10 @@ class ShelfSortEnv(gym.Env):
         self._noise_rng = None
         self.max_objects = int(max_objects)
         self.num_objects = self._check_num_objects(num_objects)
+        if min_num_objects is not None:
+            min_num_objects = self._check_num_objects(min_num_objects, "min_num_objects")
+        #: Lower end of each reset's draw of N (None: every episode has ``num_objects`` objects).
+        self.min_num_objects = min_num_objects
         self.object_set = object_set
         self.primitives = primitives
         self.map_names = map_names(primitives)
@@ -194,16 +207,26 @@ class ShelfSortEnv(gym.Env):
         self.episode_num_objects = 0
 
     # ---- configuration ----------------------------------------------------------------
-    def _check_num_objects(self, n: Any) -> int:
+    def _check_num_objects(self, n: Any, name: str = "num_objects") -> int:
         if isinstance(n, bool) or not isinstance(n, Integral):
-            raise ValueError(f"num_objects must be an integer, got {n!r}")
+            raise ValueError(f"{name} must be an integer, got {n!r}")
         if not 1 <= int(n) <= self.max_objects:
-            raise ValueError(f"num_objects must be in [1, {self.max_objects}], got {n}")
+            raise ValueError(f"{name} must be in [1, {self.max_objects}], got {n}")
         return int(n)
 
     def set_num_objects(self, n: int) -> None:
-        """Number of objects from the next reset on (for a curriculum)."""
+        """Number of objects from the next reset on (for a curriculum); the upper end of the draw
+        when ``min_num_objects`` is set."""
         self.num_objects = self._check_num_objects(n)
+
+    def episode_size(self) -> int:
+        """N of the next episode: ``num_objects``, or with ``min_num_objects`` set a uniform draw
+        from [min(min_num_objects, num_objects), num_objects] from the env's own stream
+        (``np_random``), so a seeded env replays the same sizes."""
+        if self.min_num_objects is None:
+            return self.num_objects
+        low = min(self.min_num_objects, self.num_objects)
+        return int(self.np_random.integers(low, self.num_objects + 1))
 
     # ---- episode ----------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -216,7 +239,7 @@ class ShelfSortEnv(gym.Env):
             raise ValueError(f"unknown reset options {sorted(unknown)}; known: ['num_objects']")
         if "num_objects" in options:
             self.set_num_objects(options["num_objects"])
-        self._spawn(self.num_objects)
+        self._spawn(self.episode_size())
         return self._begin_episode()
 
     def _build_world(self) -> None:

@@ -107,6 +107,11 @@ class TrainConfig:
     min_stage_timesteps: int = 0
     # a stage not passed after this many env steps is promoted anyway (0: never)
     max_stage_timesteps: int = 0
+    # the training env's min_num_objects (None: every training episode at the stage's N): each episode
+    # draws N uniformly from [min(min_num_objects, stage N), stage N], so that a high stage keeps
+    # training the low N; the demonstrations (played in the training env) draw the same way up to
+    # each of demo_objects, the greedy checks stay at the stage's N
+    min_num_objects: int | None = None
     eval_every: int = 500
     eval_episodes: int = 20
     eval_max_actions: int | None = 20
@@ -167,6 +172,11 @@ class TrainConfig:
         if not 1 <= self.start_objects <= self.max_objects <= params.MAX_OBJECTS:
             raise ValueError(f"need 1 <= start_objects <= max_objects <= {params.MAX_OBJECTS}, got "
                              f"{self.start_objects} and {self.max_objects}")
+        low = self.min_num_objects
+        if low is not None and (isinstance(low, bool) or not isinstance(low, int)
+                                or not 1 <= low <= self.max_objects):
+            raise ValueError(f"TrainConfig.min_num_objects must be None or an integer in [1, max_objects = "
+                             f"{self.max_objects}], got {low!r}")
         if not 0.002 <= self.pixel_size <= 0.02:
             raise ValueError(f"TrainConfig.pixel_size must be in [0.002, 0.02] m, got {self.pixel_size}")
         if self.batch_size < 1 or self.buffer_size < 1 or self.gradient_steps < 1 or self.learning_rate <= 0:
@@ -242,10 +252,16 @@ def make_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any)
 
 
 def make_training_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any) -> gym.Env:
-    """The env the learner acts in: `make_env`, under ``config.guard``'s supervisor (`FallGuard`) if
-    it names one. Greedy checks, evaluations and demonstrations use `make_env` (no supervisor)."""
-    env = make_env(config, num_objects, **kwargs)
-    return guarded(config, env)
+    """The env the learner acts in: `make_unsupervised_training_env`, under ``config.guard``'s
+    supervisor (`FallGuard`) if it names one. Greedy checks and evaluations use `make_env` (no
+    supervisor, no mix of sizes)."""
+    return guarded(config, make_unsupervised_training_env(config, num_objects, **kwargs))
+
+
+def make_unsupervised_training_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any) -> gym.Env:
+    """`make_env` with the training env's mix of sizes (``config.min_num_objects``): the env the
+    demonstrations are played in, and the learner's before any supervisor."""
+    return make_env(config, num_objects, min_num_objects=config.min_num_objects, **kwargs)
 
 
 def guarded(config: TrainConfig, env: gym.Env) -> gym.Env:
@@ -314,7 +330,9 @@ def collect_demonstrations(model: Any, config: TrainConfig, demos: Any, set_num_
         stats = model.collect_demonstrations(demos, per_n, capacity=capacity,
                                              counterfactuals=config.demo_counterfactuals)
         kept = f", {stats['counterfactuals']} rejected actions kept" if config.demo_counterfactuals else ""
-        log(f"demonstrations: {config.demo_policy} at N = {n}, {stats['steps']} steps, {stats['episodes']} "
+        low = config.min_num_objects
+        sizes = f"{min(low, n)}..{n} (drawn)" if low is not None and low < n else f"{n}"
+        log(f"demonstrations: {config.demo_policy} at N = {sizes}, {stats['steps']} steps, {stats['episodes']} "
             f"episodes, {stats['successes']} sorted{kept}")
     seconds = time.monotonic() - start
     log(f"demonstrations took {seconds:.0f} s")

@@ -65,6 +65,8 @@ def test_same_seed_gives_identical_observation_sequence():
     ({"primitives": ()}, "primitives"),
     ({"render_mode": "human"}, "render_mode"),
     ({"max_actions": 0}, "max_actions"),
+    ({"min_num_objects": 0}, r"min_num_objects must be in \[1, 14\]"),
+    ({"min_num_objects": 2.0}, "min_num_objects must be an integer"),
 ])
 def test_bad_constructor_arguments_raise_clear_errors(kwargs, match):
     with pytest.raises(ValueError, match=match):
@@ -95,6 +97,30 @@ def test_set_num_objects_applies_from_next_reset(env):
     env.set_num_objects(5)
     _, info = env.reset(seed=3)
     assert info["num_objects"] == 5 and len(env.world.objects) == 5
+
+
+def test_min_num_objects_draws_each_episodes_n_from_the_seeded_stream():
+    def sizes(env: ShelfSortEnv, seed: int, count: int) -> list[int]:
+        first = env.reset(seed=seed)[1]["num_objects"]
+        return [first] + [env.reset()[1]["num_objects"] for _ in range(count - 1)]
+
+    mixed = ShelfSortEnv(num_objects=5, min_num_objects=2, pixel_size=0.02)
+    drawn = sizes(mixed, 7, 24)
+    assert set(drawn) == {2, 3, 4, 5}  # both ends, and nothing outside them
+    assert len(mixed.world.objects) == drawn[-1]  # the episode's N is what it spawned
+    again = ShelfSortEnv(num_objects=5, min_num_objects=2, pixel_size=0.02)
+    assert sizes(again, 7, 24) == drawn  # the seed fixes the sizes, as it fixes the scenes
+    mixed.set_num_objects(8)  # a curriculum moves the upper end
+    assert set(sizes(mixed, 8, 30)) == set(range(2, 9))
+    mixed.set_num_objects(1)  # a stage below the lower end plays the stage's N
+    assert sizes(mixed, 9, 3) == [1, 1, 1]
+    # without it, every episode has num_objects objects and the seeded scenes are the old ones
+    plain, same = ShelfSortEnv(num_objects=5, pixel_size=0.02), ShelfSortEnv(num_objects=5, pixel_size=0.02,
+                                                                             min_num_objects=5)
+    assert sizes(plain, 3, 4) == [5, 5, 5, 5] and plain.min_num_objects is None
+    assert sizes(same, 3, 1) == [5]
+    for e in (mixed, again, plain, same):
+        e.close()
 
 
 def test_render_gives_a_picture_and_close_releases_client():

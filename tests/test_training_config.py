@@ -254,3 +254,23 @@ def test_closed_loop_reaches_the_training_and_check_envs_and_the_zoo_file():
     with pytest.raises(ValueError, match="closed_loop must be true, false or a dict"):
         config.replace(closed_loop="on")
     env.close()
+
+
+def test_min_num_objects_mixes_the_training_env_only_and_reaches_the_zoo_file():
+    from shelf_env.training import make_curriculum, make_training_env
+    from shelf_env.zoo import ENV_ID, zoo_hyperparams
+
+    config = PRESETS["p_s"].replace(min_num_objects=3, start_objects=6, pixel_size=0.02)
+    training = make_training_env(config)
+    assert training.unwrapped.min_num_objects == 3 and training.unwrapped.num_objects == 6
+    check = make_curriculum(config, verbose=0).eval_env  # greedy checks stay at the stage's N
+    assert check.unwrapped.min_num_objects is None
+    assert make_env(config).unwrapped.min_num_objects is None  # evaluations too
+    assert zoo_hyperparams(config)[ENV_ID]["env_kwargs"]["min_num_objects"] == 3
+    assert zoo_hyperparams(PRESETS["p_s"])[ENV_ID]["env_kwargs"]["min_num_objects"] is None
+    assert TrainConfig.from_dict(config.to_dict()).min_num_objects == 3
+    for bad in (0, 9, 2.5, True, "3"):
+        with pytest.raises(ValueError, match="TrainConfig.min_num_objects must be None or an integer"):
+            PRESETS["p_s"].replace(min_num_objects=bad)
+    training.close()
+    check.close()

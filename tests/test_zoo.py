@@ -7,6 +7,7 @@ import pathlib
 import subprocess
 import sys
 
+import gymnasium as gym
 import pytest
 import yaml
 
@@ -59,6 +60,24 @@ def test_48_steps_with_rl_zoo3_then_enjoy_and_record(tmp_path):
     record = _run("zoo_record.py", *common, "-n", "3", cwd=tmp_path)
     assert record.returncode == 0, record.stderr[-3000:]
     assert list((zip_path.parent / "videos").glob("*.mp4"))
+
+
+def test_recipe_callback_takes_the_training_envs_conditions_for_its_greedy_checks():
+    env = gym.make("ShelfSort-v0", pixel_size=0.02, safe_picks=True, closed_loop={"stacked": "put back"},
+                   min_num_objects=2)
+    model = PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(widths=(4, 8, 8)))
+    callback = RecipeCallback(verbose=0, demo_policy=None)
+    callback.init_callback(model)
+    config = callback._config()
+    assert config.safe_picks and config.min_num_objects == 2 and config.pixel_size == 0.02
+    assert config.closed_loop["stacked"] == "put back"
+    check = make_env(config)  # what the curriculum's greedy checks are built from
+    assert check.unwrapped.safe_picks and check.unwrapped.drag_watch == env.unwrapped.drag_watch
+    plain = RecipeCallback(verbose=0)
+    plain.init_callback(PixelDoubleDQN("FCNPolicy", make_env(PRESETS["recipe"]), policy_kwargs=dict(widths=(4, 8, 8))))
+    assert plain._config().closed_loop is False and not plain._config().safe_picks
+    check.close()
+    env.close()
 
 
 def test_recipe_callback_refuses_fields_no_run_could_use():

@@ -63,8 +63,8 @@ from shelf_env.training import (
     init_from_checkpoint,
     make_actor_env,
     make_callbacks,
-    make_env,
     make_model,
+    make_unsupervised_training_env,
     use_parallel_envs,
 )
 
@@ -349,7 +349,7 @@ def train(args: argparse.Namespace) -> None:
         config = config_from_args(args)
         progress = {"wall_seconds": 0.0, "timesteps": 0, "episodes": 0, "demo_seconds": 0.0,
                     "args": {k: str(v) for k, v in vars(args).items()}, "config": config.to_dict()}
-    env = make_env(config)
+    env = make_unsupervised_training_env(config)  # the learner's (no actor) and the demonstrations'
     if resume:
         model = PixelDoubleDQN.load(args.out / "model.zip", env=env, tensorboard_log=str(args.out / "tb"),
                                     device=args.device)

@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Fine-tune the shipped P+S model on a mix of sizes under issue 13's recommended setting (closed
+# loop with the watch's defaults, safe picks): a new run from examples/pretrained/p_s.zip's weights
+# (shelf-train --init-from) in which every training episode draws its N uniformly from 3..13
+# (TrainConfig.min_num_objects = 3 under one curriculum stage N = 13), so that training past N = 8
+# does not forget the low N as the staged fine-tune (scripts/finetune_closed_loop.sh) did. 400 H-a
+# demonstration steps drawn the same way under the same setting, a quarter of each batch from them,
+# exploration from 0.1, the actor process, no greedy checks within the budget (a single stage has
+# no gate to pass; eval_every beyond the run), the "p_s" preset otherwise. Resumable like
+# train_model.sh (runs/p_s_mixed, mirrored to results/training/p_s_mixed). Then it plays the
+# fine-tuned model with the loop breaker on issue 10's YCB grid (N = 3..14, 30 runs, seeds 0 and 1)
+# under the same setting, beside the policies of results/loop_breaker/closed_safe (whose cells it
+# reuses), and writes report.md. Extra arguments go to shelf-train (e.g. --hours 0.5).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh >/dev/null
+. .venv/bin/activate
+shelf-train --out runs/p_s_mixed --mirror results/training/p_s_mixed --preset p_s --seed 0 --threads 2 \
+    --actor --init-from examples/pretrained/p_s.zip --set safe_picks=true --set closed_loop=true \
+    --set min_num_objects=3 --start-objects 13 --max-objects 13 --max-stage-timesteps 50000 \
+    --set exploration_initial_eps=0.1 --set 'demo_objects=[13]' --set demo_fraction=0.25 \
+    --set eval_every=1000000 --checkpoint-minutes 10 --hours 0.95 "$@"
+python examples/plot_training.py results/training/p_s_mixed --png results/training/p_s_mixed/curve.png
+cp results/training/p_s_mixed/model.zip results/training/p_s_mixed.zip
+ps=examples/pretrained/p_s.zip
+out=results/loop_breaker/closed_safe_mixed
+shelf-evaluate --policies results/training/p_s_mixed.zip+loop-breaker "$ps+loop-breaker" "$ps" h-a \
+    h-a+loop-breaker h-d h-d+loop-breaker --ns 3-14 --runs 30 --seeds 2 --object-sets ycb \
+    --closed-loop '{}' --safe-picks --out "$out" --reuse-cells results/loop_breaker/closed_safe --workers 2
+python -m shelf_env.report "$out" --learned p_s_mixed+loop-breaker --pick-only p_s+loop-breaker \
+    --heuristics h-d h-a h-d+loop-breaker h-a+loop-breaker
