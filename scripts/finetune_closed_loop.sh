@@ -21,10 +21,4 @@ shelf-train --out runs/p_s_closed --mirror results/training/p_s_closed --preset 
     --checkpoint-minutes 10 --hours 1.1 "$@"
 python examples/plot_training.py results/training/p_s_closed --png results/training/p_s_closed/curve.png
 cp results/training/p_s_closed/model.zip results/training/p_s_closed.zip
-ps=examples/pretrained/p_s.zip
-out=results/loop_breaker/closed_safe_finetuned
-shelf-evaluate --policies results/training/p_s_closed.zip+loop-breaker "$ps+loop-breaker" "$ps" h-a \
-    h-a+loop-breaker h-d h-d+loop-breaker --ns 3-14 --runs 30 --seeds 2 --object-sets ycb \
-    --closed-loop '{}' --safe-picks --out "$out" --reuse-cells results/loop_breaker/closed_safe --workers 2
-python -m shelf_env.report "$out" --learned p_s_closed+loop-breaker --pick-only p_s+loop-breaker \
-    --heuristics h-d h-a h-d+loop-breaker h-a+loop-breaker
+bash scripts/evaluate_closed_safe.sh results/training/p_s_closed.zip results/loop_breaker/closed_safe_finetuned
