@@ -244,3 +244,24 @@ def test_a_supervised_run_replaces_the_vetoed_actions_and_keeps_them(tmp_path, c
     assert np.allclose(demos.rewards[:demos.n_stored][vetoed, 0], -10 - penalty * noop)
     assert train.main([*common, "--max-steps", "9", "--amend", "guard=null"]) == 2
     assert "cannot change ['guard']" in capsys.readouterr().err
+
+
+def test_min_num_objects_mixes_the_sizes_of_the_learners_env(tmp_path, monkeypatch, capsys):
+    from shelf_env.env import ShelfSortEnv
+
+    drawn: list[tuple[int | None, int, int]] = []
+    original = ShelfSortEnv.episode_size
+
+    def recording(self: ShelfSortEnv) -> int:
+        n = original(self)
+        drawn.append((self.min_num_objects, self.num_objects, n))
+        return n
+
+    monkeypatch.setattr(ShelfSortEnv, "episode_size", recording)
+    assert train.main(["--out", str(tmp_path), "--learning-starts", "50", "--buffer-size", "200", "--widths", "4",
+                       "8", "8", "--checkpoint-minutes", "0", "--threads", "1", "--max-steps", "3", "--set",
+                       "demo_steps=8", "--set", "min_num_objects=1", "--start-objects", "3"]) == 0
+    assert "demonstrations: h-a at N = 1..3 (drawn)" in capsys.readouterr().out
+    mixed = [n for low, high, n in drawn if low == 1]
+    assert mixed and all(1 <= n <= 3 for n in mixed) and all(high == 3 for low, high, _ in drawn if low == 1)
+    assert json.loads((tmp_path / "progress.json").read_text())["config"]["min_num_objects"] == 1
