@@ -22,10 +22,4 @@ shelf-train --out runs/p_s_mixed --mirror results/training/p_s_mixed --preset p_
     --set eval_every=1000000 --checkpoint-minutes 10 --hours 0.95 "$@"
 python examples/plot_training.py results/training/p_s_mixed --png results/training/p_s_mixed/curve.png
 cp results/training/p_s_mixed/model.zip results/training/p_s_mixed.zip
-ps=examples/pretrained/p_s.zip
-out=results/loop_breaker/closed_safe_mixed
-shelf-evaluate --policies results/training/p_s_mixed.zip+loop-breaker "$ps+loop-breaker" "$ps" h-a \
-    h-a+loop-breaker h-d h-d+loop-breaker --ns 3-14 --runs 30 --seeds 2 --object-sets ycb \
-    --closed-loop '{}' --safe-picks --out "$out" --reuse-cells results/loop_breaker/closed_safe --workers 2
-python -m shelf_env.report "$out" --learned p_s_mixed+loop-breaker --pick-only p_s+loop-breaker \
-    --heuristics h-d h-a h-d+loop-breaker h-a+loop-breaker
+bash scripts/evaluate_closed_safe.sh results/training/p_s_mixed.zip results/loop_breaker/closed_safe_mixed
