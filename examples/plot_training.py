@@ -94,6 +94,11 @@ def main() -> None:
     ax3.set_ylabel("objects N")
     ax3.set_ylim(0, max(ep["num_objects"]) + 1)
     fig.suptitle(f"PixelDoubleDQN ({layout_name(args.run)}) curriculum on ShelfSort-v0")
+    save(fig, png, ep)
+
+
+def save(fig: plt.Figure, png: pathlib.Path, ep: dict[str, np.ndarray]) -> None:
+    """Write ``fig`` to ``png`` atomically and print the lines per N of ``ep``."""
     fig.tight_layout()
     png.parent.mkdir(parents=True, exist_ok=True)
     write_atomically(png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
@@ -129,11 +134,7 @@ def plot_mixed(ep: dict[str, np.ndarray], window: int, png: pathlib.Path, layout
     ax3.set_xticks(sizes)
     ax3.legend(fontsize=8)
     fig.suptitle(f"PixelDoubleDQN ({layout}) on a mix of sizes, ShelfSort-v0")
-    fig.tight_layout()
-    png.parent.mkdir(parents=True, exist_ok=True)
-    write_atomically(png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
-    print("\n".join(stage_summary(ep)))
-    print(f"wrote {png}")
+    save(fig, png, ep)
 
 
 if __name__ == "__main__":
