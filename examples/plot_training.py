@@ -42,9 +42,9 @@ def run_config(run: pathlib.Path) -> dict:
     return json.loads(progress.read_text()).get("config", {}) if progress.exists() else {}
 
 
-def layout_name(run: pathlib.Path) -> str:
-    """"P+S" or "S" from the run's stored configuration (P+S when it has none)."""
-    return "P+S" if "push" in run_config(run).get("primitives", ["pick", "push"]) else "S"
+def layout_name(config: dict) -> str:
+    """"P+S" or "S" from a run's stored configuration (P+S when it has none)."""
+    return "P+S" if "push" in config.get("primitives", ["pick", "push"]) else "S"
 
 
 def rolling_mean(x: np.ndarray, window: int) -> np.ndarray:
@@ -74,8 +74,9 @@ def main() -> None:
     ep = read_episodes(args.run / "episodes.csv")
     png = args.png or args.run / "training_curve.png"
 
-    if run_config(args.run).get("min_num_objects") is not None:
-        plot_mixed(ep, args.window, png, layout_name(args.run))
+    config = run_config(args.run)
+    if config.get("min_num_objects") is not None:
+        plot_mixed(ep, args.window, png, layout_name(config))
         return
     fig, (ax1, ax3) = plt.subplots(2, 1, figsize=(8, 6), height_ratios=[2, 1])
     ax1.plot(ep["timestep"], 100 * rolling_mean(ep["success"], args.window), color="tab:green",
@@ -93,7 +94,7 @@ def main() -> None:
     ax3.set_xlabel("wall-clock minutes")
     ax3.set_ylabel("objects N")
     ax3.set_ylim(0, max(ep["num_objects"]) + 1)
-    fig.suptitle(f"PixelDoubleDQN ({layout_name(args.run)}) curriculum on ShelfSort-v0")
+    fig.suptitle(f"PixelDoubleDQN ({layout_name(config)}) curriculum on ShelfSort-v0")
     save(fig, png, ep)
 
 

@@ -94,6 +94,15 @@ SPAWN_TRIES = 100
 __all__ = ["PRIMITIVES", "ShelfSortEnv", "map_names"]
 
 
+def check_object_count(n: Any, maximum: int, name: str = "num_objects") -> int:
+    """``n`` as an int when it is an integer in [1, ``maximum``]; a `ValueError` naming ``name`` otherwise."""
+    if isinstance(n, bool) or not isinstance(n, Integral):
+        raise ValueError(f"{name} must be an integer, got {n!r}")
+    if not 1 <= int(n) <= maximum:
+        raise ValueError(f"{name} must be in [1, {maximum}], got {n}")
+    return int(n)
+
+
 class ShelfSortEnv(gym.Env):
     """Gymnasium env of the confined-shelf sorting task (see module docstring)."""
 
@@ -208,11 +217,7 @@ class ShelfSortEnv(gym.Env):
 
     # ---- configuration ----------------------------------------------------------------
     def _check_num_objects(self, n: Any, name: str = "num_objects") -> int:
-        if isinstance(n, bool) or not isinstance(n, Integral):
-            raise ValueError(f"{name} must be an integer, got {n!r}")
-        if not 1 <= int(n) <= self.max_objects:
-            raise ValueError(f"{name} must be in [1, {self.max_objects}], got {n}")
-        return int(n)
+        return check_object_count(n, self.max_objects, name)
 
     def set_num_objects(self, n: int) -> None:
         """Number of objects from the next reset on (for a curriculum); the upper end of the draw

@@ -36,6 +36,7 @@ from sb3_pixeldqn.buffers import NOOP_MODES, RELABEL_MODES
 from sb3_pixeldqn.callbacks import GATES
 from shelf_env import params
 from shelf_env.actions import PRIMITIVES, ActionCodec
+from shelf_env.env import check_object_count
 from shelf_env.evaluation import check_conditions
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
 from shelf_env.lookahead import FallGuard, LookaheadAccessibility, LookaheadDistance, LookaheadHeuristic
@@ -172,11 +173,12 @@ class TrainConfig:
         if not 1 <= self.start_objects <= self.max_objects <= params.MAX_OBJECTS:
             raise ValueError(f"need 1 <= start_objects <= max_objects <= {params.MAX_OBJECTS}, got "
                              f"{self.start_objects} and {self.max_objects}")
-        low = self.min_num_objects
-        if low is not None and (isinstance(low, bool) or not isinstance(low, int)
-                                or not 1 <= low <= self.max_objects):
-            raise ValueError(f"TrainConfig.min_num_objects must be None or an integer in [1, max_objects = "
-                             f"{self.max_objects}], got {low!r}")
+        if self.min_num_objects is not None:
+            try:  # the env's own check, against the curriculum's last stage
+                check_object_count(self.min_num_objects, self.max_objects, "min_num_objects")
+            except ValueError as err:
+                raise ValueError(f"TrainConfig.min_num_objects must be None or an integer in [1, max_objects = "
+                                 f"{self.max_objects}]: {err}") from err
         if not 0.002 <= self.pixel_size <= 0.02:
             raise ValueError(f"TrainConfig.pixel_size must be in [0.002, 0.02] m, got {self.pixel_size}")
         if self.batch_size < 1 or self.buffer_size < 1 or self.gradient_steps < 1 or self.learning_rate <= 0:
@@ -331,7 +333,7 @@ def collect_demonstrations(model: Any, config: TrainConfig, demos: Any, set_num_
                                              counterfactuals=config.demo_counterfactuals)
         kept = f", {stats['counterfactuals']} rejected actions kept" if config.demo_counterfactuals else ""
         low = config.min_num_objects
-        sizes = f"{min(low, n)}..{n} (drawn)" if low is not None and low < n else f"{n}"
+        sizes = f"{low}..{n} (drawn)" if low is not None and low < n else f"{n}"
         log(f"demonstrations: {config.demo_policy} at N = {sizes}, {stats['steps']} steps, {stats['episodes']} "
             f"episodes, {stats['successes']} sorted{kept}")
     seconds = time.monotonic() - start
