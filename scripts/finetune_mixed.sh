@@ -10,8 +10,14 @@
 # train_model.sh (runs/p_s_mixed, mirrored to results/training/p_s_mixed). Then it plays the
 # fine-tuned model with the loop breaker on issue 10's YCB grid (N = 3..14, 30 runs, seeds 0 and 1)
 # under the same setting, beside the policies of results/loop_breaker/closed_safe (whose cells it
-# reuses), and writes report.md. Extra arguments go to shelf-train (e.g. --hours 0.5).
+# reuses), and writes report.md. Extra arguments go to shelf-train (e.g. --hours 0.5; the budget is
+# the run's total over all resumes). SUFFIX names a later snapshot of the same run, so that the
+# earlier one's zip and evaluation stay as committed: SUFFIX=_long bash scripts/finetune_mixed.sh
+# --hours 2.25 resumes the run to 2.25 hours in all, copies the model to
+# results/training/p_s_mixed_long.zip and evaluates it into results/loop_breaker/closed_safe_mixed_long.
 set -euo pipefail
+suffix=${SUFFIX:-}
+case $suffix in *[!A-Za-z0-9_-]*) echo "SUFFIX may hold only letters, digits, _ and - (got: $suffix)" >&2; exit 2;; esac
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
@@ -21,5 +27,6 @@ shelf-train --out runs/p_s_mixed --mirror results/training/p_s_mixed --preset p_
     --set exploration_initial_eps=0.1 --set 'demo_objects=[13]' --set demo_fraction=0.25 \
     --set eval_every=1000000 --checkpoint-minutes 10 --hours 0.95 "$@"
 python examples/plot_training.py results/training/p_s_mixed --png results/training/p_s_mixed/curve.png
-cp results/training/p_s_mixed/model.zip results/training/p_s_mixed.zip
-bash scripts/evaluate_closed_safe.sh results/training/p_s_mixed.zip results/loop_breaker/closed_safe_mixed
+cp results/training/p_s_mixed/model.zip "results/training/p_s_mixed$suffix.zip.tmp"
+mv "results/training/p_s_mixed$suffix.zip.tmp" "results/training/p_s_mixed$suffix.zip"
+bash scripts/evaluate_closed_safe.sh "results/training/p_s_mixed$suffix.zip" "results/loop_breaker/closed_safe_mixed$suffix"

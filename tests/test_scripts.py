@@ -1,0 +1,32 @@
+"""The fine-tune and evaluation scripts refuse bad arguments before they set up, train or write."""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import subprocess
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def _bash(script: str, *args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(["bash", str(ROOT / "scripts" / script), *args], capture_output=True, text=True,
+                          timeout=60, env={**os.environ, **(env or {})})
+
+
+def test_evaluate_closed_safe_names_a_missing_checkpoint(tmp_path: pathlib.Path) -> None:
+    out = tmp_path / "out"
+    done = _bash("evaluate_closed_safe.sh", str(tmp_path / "missing.zip"), str(out))
+    assert done.returncode == 2
+    assert "usage: bash scripts/evaluate_closed_safe.sh ZIP OUT" in done.stderr
+    assert "missing.zip" in done.stderr
+    assert not out.exists()
+    assert _bash("evaluate_closed_safe.sh").returncode == 2
+
+
+def test_finetune_mixed_refuses_a_suffix_that_is_not_a_plain_name() -> None:
+    before = sorted((ROOT / "results" / "training").glob("p_s_mixed*"))
+    done = _bash("finetune_mixed.sh", env={"SUFFIX": "../x"})
+    assert done.returncode == 2
+    assert "SUFFIX may hold only letters, digits, _ and -" in done.stderr and "../x" in done.stderr
+    assert sorted((ROOT / "results" / "training").glob("p_s_mixed*")) == before
