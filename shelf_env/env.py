@@ -180,9 +180,9 @@ class ShelfSortEnv(gym.Env):
         self.safe_picks = safe_picks
         self._noise_rng = None
         self.max_objects = int(max_objects)
-        self.num_objects = self._check_num_objects(num_objects)
+        self.num_objects = check_object_count(num_objects, self.max_objects)
         if min_num_objects is not None:
-            min_num_objects = self._check_num_objects(min_num_objects, "min_num_objects")
+            min_num_objects = check_object_count(min_num_objects, self.max_objects, "min_num_objects")
         #: Lower end of each reset's draw of N (None: every episode has ``num_objects`` objects).
         self.min_num_objects = min_num_objects
         self.object_set = object_set
@@ -216,13 +216,10 @@ class ShelfSortEnv(gym.Env):
         self.episode_num_objects = 0
 
     # ---- configuration ----------------------------------------------------------------
-    def _check_num_objects(self, n: Any, name: str = "num_objects") -> int:
-        return check_object_count(n, self.max_objects, name)
-
     def set_num_objects(self, n: int) -> None:
         """Number of objects from the next reset on (for a curriculum); the upper end of the draw
         when ``min_num_objects`` is set."""
-        self.num_objects = self._check_num_objects(n)
+        self.num_objects = check_object_count(n, self.max_objects)
 
     def episode_size(self) -> int:
         """N of the next episode: ``num_objects``, or with ``min_num_objects`` set a uniform draw
