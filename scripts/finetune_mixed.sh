@@ -15,18 +15,28 @@
 # earlier one's zip and evaluation stay as committed: SUFFIX=_long bash scripts/finetune_mixed.sh
 # --hours 2.25 resumes the run to 2.25 hours in all, copies the model to
 # results/training/p_s_mixed_long.zip and evaluates it into results/loop_breaker/closed_safe_mixed_long.
+# RUN names another run of the same recipe (runs/$RUN, results/training/$RUN[.zip], evaluated into
+# results/loop_breaker/closed_safe_${RUN#p_s_}) and INIT the zip it starts from, e.g. the progress
+# reward from the one-hour snapshot: RUN=p_s_progress INIT=results/training/p_s_mixed.zip
+# bash scripts/finetune_mixed.sh --set progress_reward=1 --hours 0.8.
 set -euo pipefail
 suffix=${SUFFIX:-}
-case $suffix in *[!A-Za-z0-9_-]*) echo "SUFFIX may hold only letters, digits, _ and - (got: $suffix)" >&2; exit 2;; esac
+run=${RUN-p_s_mixed}
+init=${INIT:-examples/pretrained/p_s.zip}
+for name in "$suffix" "$run"; do
+    case $name in *[!A-Za-z0-9_-]*) echo "SUFFIX and RUN may hold only letters, digits, _ and - (got: $name)" >&2; exit 2;; esac
+done
+[ -n "$run" ] || { echo "RUN must not be empty" >&2; exit 2; }
 cd "$(dirname "$0")/.."
+[ -f "$init" ] || { echo "INIT: no such checkpoint: $init" >&2; exit 2; }
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
-shelf-train --out runs/p_s_mixed --mirror results/training/p_s_mixed --preset p_s --seed 0 --threads 2 \
-    --actor --init-from examples/pretrained/p_s.zip --set safe_picks=true --set closed_loop=true \
+shelf-train --out "runs/$run" --mirror "results/training/$run" --preset p_s --seed 0 --threads 2 \
+    --actor --init-from "$init" --set safe_picks=true --set closed_loop=true \
     --set min_num_objects=3 --start-objects 13 --max-objects 13 --max-stage-timesteps 50000 \
     --set exploration_initial_eps=0.1 --set 'demo_objects=[13]' --set demo_fraction=0.25 \
     --set eval_every=1000000 --checkpoint-minutes 10 --hours 0.95 "$@"
-python examples/plot_training.py results/training/p_s_mixed --png results/training/p_s_mixed/curve.png
-cp results/training/p_s_mixed/model.zip "results/training/p_s_mixed$suffix.zip.tmp"
-mv "results/training/p_s_mixed$suffix.zip.tmp" "results/training/p_s_mixed$suffix.zip"
-bash scripts/evaluate_closed_safe.sh "results/training/p_s_mixed$suffix.zip" "results/loop_breaker/closed_safe_mixed$suffix"
+python examples/plot_training.py "results/training/$run" --png "results/training/$run/curve.png"
+cp "results/training/$run/model.zip" "results/training/$run$suffix.zip.tmp"
+mv "results/training/$run$suffix.zip.tmp" "results/training/$run$suffix.zip"
+bash scripts/evaluate_closed_safe.sh "results/training/$run$suffix.zip" "results/loop_breaker/closed_safe_${run#p_s_}$suffix"

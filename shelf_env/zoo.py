@@ -48,7 +48,8 @@ MODEL_KEYS = ("learning_rate", "buffer_size", "learning_starts", "batch_size", "
               "target_update_interval", "exploration_initial_eps", "exploration_final_eps", "exploration_timesteps",
               "masked", "masked_exploration", "demo_fraction", "margin", "margin_weight")
 #: TrainConfig fields that go to the env (as ``env_kwargs``).
-ENV_KEYS = ("object_set", "primitives", "pixel_size", "safe_picks", "closed_loop", "min_num_objects")
+ENV_KEYS = ("object_set", "primitives", "pixel_size", "safe_picks", "closed_loop", "min_num_objects",
+            "progress_reward")
 
 
 def register() -> None:
@@ -130,8 +131,8 @@ class RecipeCallback(BaseCallback):
         self.children: CallbackList | None = None
 
     def _config(self) -> TrainConfig:
-        """The config: the training env's layout, cell size, object set, safe picks, closed loop and
-        mix of sizes (``env_kwargs``) with this callback's fields; the greedy checks' env is built
+        """The config: the training env's layout, cell size, object set, safe picks, closed loop, mix
+        of sizes and progress reward (``env_kwargs``) with this callback's fields; the greedy checks' env is built
         from it, so it plays under the training env's conditions."""
         env = self.training_env
         codec: ActionCodec = env.get_attr("codec")[0]
@@ -140,7 +141,8 @@ class RecipeCallback(BaseCallback):
         settings = {"primitives": primitives, "object_set": env.get_attr("object_set")[0],
                     "pixel_size": codec.pixel_size, "safe_picks": env.get_attr("safe_picks")[0],
                     "closed_loop": False if watch is None else dataclasses.asdict(watch),
-                    "min_num_objects": env.get_attr("min_num_objects")[0]}
+                    "min_num_objects": env.get_attr("min_num_objects")[0],
+                    "progress_reward": env.get_attr("progress_reward")[0]}
         return PRESETS["recipe"].replace(**{**settings, **self.fields})
 
     def update_child_locals(self, locals_: dict[str, Any]) -> None:

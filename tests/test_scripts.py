@@ -28,5 +28,17 @@ def test_finetune_mixed_refuses_a_suffix_that_is_not_a_plain_name() -> None:
     before = sorted((ROOT / "results" / "training").glob("p_s_mixed*"))
     done = _bash("finetune_mixed.sh", env={"SUFFIX": "../x"})
     assert done.returncode == 2
-    assert "SUFFIX may hold only letters, digits, _ and -" in done.stderr and "../x" in done.stderr
+    assert "SUFFIX and RUN may hold only letters, digits, _ and -" in done.stderr and "../x" in done.stderr
     assert sorted((ROOT / "results" / "training").glob("p_s_mixed*")) == before
+
+
+def test_finetune_mixed_refuses_a_bad_run_name_or_a_missing_init_checkpoint(tmp_path: pathlib.Path) -> None:
+    before = sorted((ROOT / "results" / "training").iterdir())
+    done = _bash("finetune_mixed.sh", env={"RUN": "a/b"})
+    assert done.returncode == 2 and "(got: a/b)" in done.stderr
+    assert _bash("finetune_mixed.sh", env={"RUN": ""}).returncode == 2
+    missing = str(tmp_path / "none.zip")
+    done = _bash("finetune_mixed.sh", env={"RUN": "p_s_x", "INIT": missing})
+    assert done.returncode == 2 and f"INIT: no such checkpoint: {missing}" in done.stderr
+    assert sorted((ROOT / "results" / "training").iterdir()) == before
+    assert not (ROOT / "runs" / "p_s_x").exists()
