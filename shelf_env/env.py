@@ -156,6 +156,8 @@ class ShelfSortEnv(gym.Env):
     _obs: np.ndarray | None
     safe_picks: bool
     progress_reward: float
+    _region_before: dict[int, int]
+    _sorted_before: int
 
     def __init__(
         self,
@@ -199,7 +201,9 @@ class ShelfSortEnv(gym.Env):
         self.safe_picks = safe_picks
         #: Reward per object a valid step sorts (and minus per object it unsorts); 0: the paper's.
         self.progress_reward = check_progress_reward(progress_reward)
-        self._region_before: dict[int, int] = {}
+        #: With a progress reward: each object's region (by uid) and the sorted count after the last step.
+        self._region_before = {}
+        self._sorted_before = 0
         self._noise_rng = None
         self.max_objects = int(max_objects)
         self.num_objects = check_object_count(num_objects, self.max_objects)
@@ -308,7 +312,8 @@ class ShelfSortEnv(gym.Env):
             self._noise_rng = np.random.default_rng(int(self.np_random.integers(2**63)))
         judgement = task.judge(self.world)
         self.num_unsorted_initial = int((judgement.region != judgement.classes).sum())
-        self._region_before = self._region_of_uid(judgement)
+        if self.progress_reward:
+            self._region_before, self._sorted_before = self._region_of_uid(judgement), judgement.num_sorted
         self._obs = self._observe()
         return self._obs.copy(), self._info(None, judgement)
 
@@ -412,15 +417,13 @@ class ShelfSortEnv(gym.Env):
         self.action_count += 1
 
         judgement = task.judge(self.world)
-        reward, relabel_bonus = judgement.reward, 0.0
-        if judgement.valid:  # every object is inside: judgement's arrays line up with world.objects
+        reward, relabel_reward = judgement.reward, params.REWARD_SORTED
+        if self.progress_reward and judgement.valid:  # every object inside: arrays line up with world.objects
             region_after = self._region_of_uid(judgement)
-            if self.progress_reward:
-                sorted_by_step = self._num_sorted(region_after) - self._num_sorted(self._region_before)
-                reward += self.progress_reward * sorted_by_step
-                relabel_bonus = self.progress_reward * sum(
-                    region != self._region_before.get(uid, -1) for uid, region in region_after.items())
-            self._region_before = region_after
+            reward += self.progress_reward * (judgement.num_sorted - self._sorted_before)
+            relabel_reward += self.progress_reward * sum(
+                region != self._region_before.get(uid, -1) for uid, region in region_after.items())
+            self._region_before, self._sorted_before = region_after, judgement.num_sorted
         for obj, ok in zip(list(self.world.objects), judgement.inside):
             if not ok:  # it left the cabinet: remove it so it cannot roll around forever
                 self.world.remove_object(obj)
@@ -434,7 +437,7 @@ class ShelfSortEnv(gym.Env):
             info["relabelled"] = {
                 "obs": recolour(*before, relabel, self._regions_mask),
                 "next_obs": recolour(*self._observed_semantic(), relabel, self._regions_mask),
-                "reward": params.REWARD_SORTED + relabel_bonus,
+                "reward": relabel_reward,
                 "terminated": True,
             }
         if judgement.terminated or truncated:  # a VecEnv resets before the learner can ask for the final mask
@@ -444,11 +447,6 @@ class ShelfSortEnv(gym.Env):
     def _region_of_uid(self, judgement: task.Judgement) -> dict[int, int]:
         """Region index (-1: none) of each object, by uid, when every object is inside."""
         return {o.uid: int(r) for o, r in zip(self.world.objects, judgement.region)}
-
-    def _num_sorted(self, region_of_uid: dict[int, int]) -> int:
-        """How many objects of ``region_of_uid`` lie in their own class's region."""
-        own = self._class_of_uid()
-        return sum(region == own.get(uid, -2) for uid, region in region_of_uid.items())
 
     def _pick_and_place(self, x: float, y: float, surface_z: float) -> None:
         """Pick at (x, y); if the cup holds an object, place it where `_place_for` puts it."""
@@ -545,7 +543,7 @@ class ShelfSortEnv(gym.Env):
         return {
             "is_success": judgement.is_success(self.episode_num_objects),
             "num_objects": self.episode_num_objects,
-            "num_sorted": int((judgement.region == judgement.classes).sum()),
+            "num_sorted": judgement.num_sorted,
             "num_unsorted_initial": self.num_unsorted_initial,
             "fell": judgement.fell,
             "primitive": primitive,

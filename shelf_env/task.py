@@ -41,6 +41,11 @@ class Judgement:
         return float(params.REWARD_SORTED if self.sorted else params.REWARD_STEP)
 
     @property
+    def num_sorted(self) -> int:
+        """How many of the objects inside lie in their own class's region (``info["num_sorted"]``)."""
+        return int((self.region == self.classes).sum())
+
+    @property
     def terminated(self) -> bool:
         return self.sorted or not self.valid
 
