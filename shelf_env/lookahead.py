@@ -47,7 +47,6 @@ import pybullet as pb
 
 from sb3_pixeldqn.buffers import CORRECTION_KEY
 from sb3_pixeldqn.files import write_atomically
-from shelf_env import params
 from shelf_env.env import ShelfSortEnv
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, ObservationView, PickHeuristic, front_most
 
@@ -77,8 +76,10 @@ class Outcome:
 
     @property
     def valid(self) -> bool:
-        """Nothing fell and everything came to rest (the task's rules, `shelf_env.task`)."""
-        return self.reward != params.REWARD_INVALID
+        """Nothing fell and everything came to rest (the task's rules, `shelf_env.task`): the step did not
+        end the episode, or ended it sorted (read from the flags, not the reward, which the env's
+        ``invalid_reward`` may change)."""
+        return not self.terminated or self.is_success
 
 
 def digest(obs: np.ndarray) -> str:

@@ -36,7 +36,7 @@ from sb3_pixeldqn.buffers import NOOP_MODES, RELABEL_MODES
 from sb3_pixeldqn.callbacks import GATES
 from shelf_env import params
 from shelf_env.actions import PRIMITIVES, ActionCodec
-from shelf_env.env import check_object_count, check_progress_reward
+from shelf_env.env import check_invalid_reward, check_object_count, check_progress_reward
 from shelf_env.evaluation import check_conditions
 from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
 from shelf_env.lookahead import FallGuard, LookaheadAccessibility, LookaheadDistance, LookaheadHeuristic
@@ -89,6 +89,9 @@ class TrainConfig:
     noop_penalty: float = 1.0
     # the training env's progress_reward (ShelfSortEnv): + this per object a valid step sorts, 0: the paper's reward
     progress_reward: float = 0.0
+    # the training env's invalid_reward (ShelfSortEnv): the reward of a step that drops an object or leaves
+    # the scene unstable; -10 is the paper's, under which a 10 % fall risk per action is worth one action
+    invalid_reward: float = -10.0
     # lever 5: target and optimiser
     learning_rate: float = 1e-3
     tau: float = 1.0
@@ -164,6 +167,7 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.safe_picks must be true or false, got {self.safe_picks!r}")
         try:
             check_progress_reward(self.progress_reward)
+            check_invalid_reward(self.invalid_reward)
         except ValueError as err:
             raise ValueError(f"TrainConfig.{err}") from err
         try:  # the evaluation's own check of the env option (JSON-able: no DragWatch objects)
@@ -268,10 +272,11 @@ def make_training_env(config: TrainConfig, num_objects: int | None = None, **kwa
 
 def make_unsupervised_training_env(config: TrainConfig, num_objects: int | None = None, **kwargs: Any) -> gym.Env:
     """`make_env` with the training env's mix of sizes (``config.min_num_objects``) and reward
-    (``config.progress_reward``): the env the demonstrations are played in, and the learner's before
-    any supervisor. Greedy checks and evaluations judge success, which no reward setting changes."""
+    (``config.progress_reward``, ``config.invalid_reward``): the env the demonstrations are played in,
+    and the learner's before any supervisor. Greedy checks and evaluations judge success, which no
+    reward setting changes."""
     return make_env(config, num_objects, min_num_objects=config.min_num_objects,
-                    progress_reward=config.progress_reward, **kwargs)
+                    progress_reward=config.progress_reward, invalid_reward=config.invalid_reward, **kwargs)
 
 
 def guarded(config: TrainConfig, env: gym.Env) -> gym.Env:

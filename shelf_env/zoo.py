@@ -19,9 +19,9 @@ the all-pixel argmax (`PixelDoubleDQN.predict`'s documented behaviour without ``
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import pathlib
-import sys
 from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
@@ -49,7 +49,7 @@ MODEL_KEYS = ("learning_rate", "buffer_size", "learning_starts", "batch_size", "
               "masked", "masked_exploration", "demo_fraction", "margin", "margin_weight")
 #: TrainConfig fields that go to the env (as ``env_kwargs``).
 ENV_KEYS = ("object_set", "primitives", "pixel_size", "safe_picks", "closed_loop", "min_num_objects",
-            "progress_reward")
+            "progress_reward", "invalid_reward")
 
 
 def register() -> None:
@@ -132,7 +132,7 @@ class RecipeCallback(BaseCallback):
 
     def _config(self) -> TrainConfig:
         """The config: the training env's layout, cell size, object set, safe picks, closed loop, mix
-        of sizes and progress reward (``env_kwargs``) with this callback's fields; the greedy checks' env is built
+        of sizes and rewards (``env_kwargs``) with this callback's fields; the greedy checks' env is built
         from it, so it plays under the training env's conditions."""
         env = self.training_env
         codec: ActionCodec = env.get_attr("codec")[0]
@@ -142,7 +142,8 @@ class RecipeCallback(BaseCallback):
                     "pixel_size": codec.pixel_size, "safe_picks": env.get_attr("safe_picks")[0],
                     "closed_loop": False if watch is None else dataclasses.asdict(watch),
                     "min_num_objects": env.get_attr("min_num_objects")[0],
-                    "progress_reward": env.get_attr("progress_reward")[0]}
+                    "progress_reward": env.get_attr("progress_reward")[0],
+                    "invalid_reward": env.get_attr("invalid_reward")[0]}
         return PRESETS["recipe"].replace(**{**settings, **self.fields})
 
     def update_child_locals(self, locals_: dict[str, Any]) -> None:
@@ -192,7 +193,17 @@ class RecipeCallback(BaseCallback):
             self.children.on_training_end()
 
 
-if __name__ == "__main__":
-    target = pathlib.Path(sys.argv[1]) if len(sys.argv) > 1 else HYPERPARAMS
+def main(argv: list[str] | None = None) -> int:
+    """``python -m shelf_env.zoo [PATH]``: write the rl-zoo3 hyperparameter file (default `HYPERPARAMS`)."""
+    parser = argparse.ArgumentParser(prog="python -m shelf_env.zoo",
+                                     description="Write rl-zoo3's hyperparameter file from PRESETS['recipe'].")
+    parser.add_argument("path", nargs="?", type=pathlib.Path, default=HYPERPARAMS,
+                        help=f"where to write it (default {HYPERPARAMS})")
+    target = parser.parse_args(argv).path
     write_hyperparams(target)
     print(f"wrote {target}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -108,3 +108,15 @@ def test_recipe_callback_refuses_fields_no_run_could_use():
     teacher.init_callback(two)
     with pytest.raises(ValueError, match="probes the simulator of the env it plays in.*2 env"):
         teacher.on_training_start({}, {})
+
+
+def test_the_hyperparameter_writer_answers_help_without_writing(tmp_path, monkeypatch, capsys):
+    from shelf_env.zoo import main
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as done:
+        main(["--help"])
+    assert done.value.code == 0 and "usage: python -m shelf_env.zoo" in capsys.readouterr().out
+    assert list(tmp_path.iterdir()) == []
+    assert main([str(tmp_path / "zoo.yml")]) == 0
+    assert "invalid_reward: -10.0" in (tmp_path / "zoo.yml").read_text()
