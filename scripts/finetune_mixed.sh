@@ -18,7 +18,8 @@
 # RUN names another run of the same recipe (runs/$RUN, results/training/$RUN[.zip], evaluated into
 # results/loop_breaker/closed_safe_${RUN#p_s_}) and INIT the zip it starts from, e.g. the progress
 # reward from the one-hour snapshot: RUN=p_s_progress INIT=results/training/p_s_mixed.zip
-# bash scripts/finetune_mixed.sh --set progress_reward=1 --hours 1.0.
+# bash scripts/finetune_mixed.sh --set progress_reward=1 --hours 1.0, or a fall penalty of -30:
+# RUN=p_s_fall30 INIT=results/training/p_s_mixed.zip bash scripts/finetune_mixed.sh --set invalid_reward=-30 --hours 0.6.
 set -euo pipefail
 suffix=${SUFFIX:-}
 run=${RUN-p_s_mixed}
