@@ -42,3 +42,12 @@ def test_finetune_mixed_refuses_a_bad_run_name_or_a_missing_init_checkpoint(tmp_
     assert done.returncode == 2 and f"INIT: no such checkpoint: {missing}" in done.stderr
     assert sorted((ROOT / "results" / "training").iterdir()) == before
     assert not (ROOT / "runs" / "p_s_x").exists()
+
+
+def test_privileged_ceiling_refuses_an_unknown_mode_before_it_writes() -> None:
+    before = sorted(p.name for p in (ROOT / "results").iterdir())
+    done = _bash("privileged_ceiling.sh", "closed")
+    assert done.returncode == 2
+    assert "usage: bash scripts/privileged_ceiling.sh [closed_safe|open]" in done.stderr
+    assert "(got mode: closed)" in done.stderr
+    assert sorted(p.name for p in (ROOT / "results").iterdir()) == before
