@@ -439,7 +439,7 @@ class ShelfSortEnv(gym.Env):
         self.action_count += 1
 
         judgement = task.judge(self.world)
-        reward = judgement.reward if judgement.valid else self.invalid_reward
+        reward = judgement.reward_with(self.invalid_reward)
         relabel_reward = params.REWARD_SORTED
         if self.progress_reward and judgement.valid:  # every object inside: arrays line up with world.objects
             region_after = self._region_of_uid(judgement)

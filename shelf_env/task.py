@@ -36,8 +36,12 @@ class Judgement:
 
     @property
     def reward(self) -> float:
+        return self.reward_with()
+
+    def reward_with(self, invalid: float = params.REWARD_INVALID) -> float:
+        """Eq. 2 with ``invalid`` as the reward of an invalid step (the env's ``invalid_reward``)."""
         if not self.valid:
-            return float(params.REWARD_INVALID)
+            return float(invalid)
         return float(params.REWARD_SORTED if self.sorted else params.REWARD_STEP)
 
     @property

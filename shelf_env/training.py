@@ -91,7 +91,7 @@ class TrainConfig:
     progress_reward: float = 0.0
     # the training env's invalid_reward (ShelfSortEnv): the reward of a step that drops an object or leaves
     # the scene unstable; -10 is the paper's, under which a 10 % fall risk per action is worth one action
-    invalid_reward: float = -10.0
+    invalid_reward: float = params.REWARD_INVALID
     # lever 5: target and optimiser
     learning_rate: float = 1e-3
     tau: float = 1.0
