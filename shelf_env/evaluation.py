@@ -13,8 +13,10 @@ Policies are named by a string: ``"h-d"``, ``"h-a"``, ``"random"``, the privileg
 `PixelDoubleDQN` zip (P+S or S; the env layout follows the checkpoint). Any of them with
 `LOOP_BREAKER` appended (``"examples/pretrained/p_s.zip+loop-breaker"``, ``"h-a+loop-breaker"``)
 is played under `sb3_pixeldqn.loop_breaker.LoopBreaker` (its defaults), with cells of its own
-(labels ``p_s+loop-breaker``, ``h-a+loop-breaker``). `check_policy` validates a name before any
-work starts.
+(labels ``p_s+loop-breaker``, ``h-a+loop-breaker``). A checkpoint with `FALL_FILTER` appended
+(``"examples/pretrained/p_s.zip+fall-filter"``, also before ``+loop-breaker``) is played under
+`shelf_env.fall_risk.FallFilter` with the learned fall-risk model saved beside it
+(`fall_filter_path`: ``p_s.fall_risk.pt``). `check_policy` validates a name before any work starts.
 """
 
 from __future__ import annotations
@@ -49,6 +51,9 @@ HELDOUT_SEED = 1000
 NAMED_POLICIES = (*HEURISTICS, "random")
 #: Appended to a checkpoint's path: play it under `sb3_pixeldqn.loop_breaker.LoopBreaker`.
 LOOP_BREAKER = "+loop-breaker"
+#: Appended to a checkpoint's path (before any `LOOP_BREAKER`): play it under
+#: `shelf_env.fall_risk.FallFilter` with the fall-risk model of `fall_filter_path`.
+FALL_FILTER = "+fall-filter"
 
 
 @dataclass(frozen=True)
@@ -113,9 +118,26 @@ def scene_seed(seed: int, num_objects: int, run: int) -> int:
     return int(np.random.SeedSequence([seed, num_objects, run]).generate_state(1)[0])
 
 
+def policy_wrappers(policy: str) -> tuple[str, tuple[str, ...]]:
+    """``policy`` split into its checkpoint path (or name) and its wrappers, innermost first:
+    ``"p.zip+fall-filter+loop-breaker"`` -> ``("p.zip", ("+fall-filter", "+loop-breaker"))``."""
+    wrappers: list[str] = []
+    for suffix in (LOOP_BREAKER, FALL_FILTER):
+        if policy.endswith(suffix):
+            policy, wrappers = policy[:-len(suffix)], [suffix, *wrappers]
+    return policy, tuple(wrappers)
+
+
 def policy_file(policy: str) -> str:
-    """The checkpoint path (or the name) of ``policy``, without `LOOP_BREAKER`."""
-    return policy[:-len(LOOP_BREAKER)] if policy.endswith(LOOP_BREAKER) else policy
+    """The checkpoint path (or the name) of ``policy``, without `FALL_FILTER` or `LOOP_BREAKER`."""
+    return policy_wrappers(policy)[0]
+
+
+def fall_filter_path(checkpoint: str | os.PathLike) -> pathlib.Path:
+    """The learned fall-risk model a ``<checkpoint>+fall-filter`` policy uses: ``<stem>.fall_risk.pt``
+    beside the checkpoint (``python -m shelf_env.fall_risk train --init <checkpoint>`` makes one)."""
+    path = pathlib.Path(checkpoint)
+    return path.with_name(path.stem + ".fall_risk.pt")
 
 
 def is_named(policy: str) -> bool:
@@ -128,8 +150,8 @@ def policy_label(policy: str) -> str:
     `LOOP_BREAKER` where it is played under one)."""
     if is_named(policy):
         return policy
-    suffix = LOOP_BREAKER if policy.endswith(LOOP_BREAKER) else ""
-    return pathlib.Path(policy_file(policy)).stem + suffix
+    name, wrappers = policy_wrappers(policy)
+    return pathlib.Path(name).stem + "".join(wrappers)
 
 
 def checkpoint_primitives(path: str | os.PathLike) -> tuple[str, ...]:
@@ -164,9 +186,17 @@ def policy_pixel_size(policy: str) -> float:
 
 def check_policy(policy: str, primitives: tuple[str, ...] | None = None) -> tuple[str, ...]:
     """Validate a policy name (and a forced layout) before work starts; returns the env primitives."""
+    name, wrappers = policy_wrappers(policy)
+    if FALL_FILTER in wrappers:
+        if name in NAMED_POLICIES:
+            raise ValueError(f"{FALL_FILTER} filters a checkpoint's picks with the fall-risk model saved beside it; "
+                             f"{name!r} is not a checkpoint")
+        if not fall_filter_path(name).is_file():
+            raise ValueError(f"policy {policy}: no fall-risk model at {fall_filter_path(name)} (python -m "
+                             f"shelf_env.fall_risk train --init {name} --out {fall_filter_path(name)} makes one)")
     if is_named(policy):
         return primitives or ("pick", "push")
-    needed = checkpoint_primitives(policy_file(policy))
+    needed = checkpoint_primitives(name)
     if primitives is not None and tuple(primitives) != needed:
         raise ValueError(
             f"checkpoint {policy} was trained with primitives {needed} but the evaluation env has {tuple(primitives)}"
@@ -182,9 +212,9 @@ def check_ns(ns: list[int], max_objects: int = params.MAX_OBJECTS) -> list[int]:
 
 
 def make_policy(policy: str, env: gym.Env, seed: int = 0) -> Any:
-    """An object with SB3's ``predict`` for ``policy`` acting in ``env`` (under a `LoopBreaker`
-    where ``policy`` ends with `LOOP_BREAKER`)."""
-    name = policy_file(policy)
+    """An object with SB3's ``predict`` for ``policy`` acting in ``env`` (under a `FallFilter` and a
+    `LoopBreaker` where ``policy`` names them, `policy_wrappers`)."""
+    name, wrappers = policy_wrappers(policy)
     agent: Any
     if name in HEURISTICS:
         agent = HEURISTICS[name](env)
@@ -194,7 +224,12 @@ def make_policy(policy: str, env: gym.Env, seed: int = 0) -> Any:
         from sb3_pixeldqn import PixelDoubleDQN
 
         agent = PixelDoubleDQN.load(name, env=env, device="cpu")
-    return LoopBreaker(agent) if policy.endswith(LOOP_BREAKER) else agent
+    if FALL_FILTER in wrappers:
+        from shelf_env.fall_risk import FallFilter, FallRiskModel
+
+        base: Any = env.unwrapped
+        agent = FallFilter(agent, FallRiskModel.load(fall_filter_path(name)), base.map_names, base.rows, base.cols)
+    return LoopBreaker(agent) if LOOP_BREAKER in wrappers else agent
 
 
 def takes_action_masks(policy: Any) -> bool:
@@ -408,7 +443,8 @@ def check_cell_owner(out: pathlib.Path, policies: list[str], record: bool = Fals
     one file. Two checkpoints with one stem in ``policies`` are refused, and so is a checkpoint whose
     label's cells in ``<out>`` came from another file (a retrained model shipped under the same
     name): its old cells would otherwise be reused as its results. ``record=True`` writes each
-    checkpoint's sha256 beside its cells (before the first cell is written)."""
+    checkpoint's sha256 beside its cells (before the first cell is written; with `FALL_FILTER`, of the
+    checkpoint's and its fall-risk model's bytes together)."""
     seen: dict[str, str] = {}
     for policy in policies:
         if is_named(policy):
@@ -417,7 +453,9 @@ def check_cell_owner(out: pathlib.Path, policies: list[str], record: bool = Fals
         if seen.setdefault(label, policy) != policy:
             raise ValueError(f"checkpoints {seen[label]} and {policy} share the label {label!r} (the file stem) "
                              "that names their cells: rename one")
-        digest = hashlib.sha256(pathlib.Path(policy_file(policy)).read_bytes()).hexdigest()
+        name, wrappers = policy_wrappers(policy)
+        files = [pathlib.Path(name)] + ([fall_filter_path(name)] if FALL_FILTER in wrappers else [])
+        digest = hashlib.sha256(b"".join(f.read_bytes() for f in files)).hexdigest()
         path = fingerprint_path(out, policy)
         if path.exists():
             before = path.read_text().strip()

@@ -254,6 +254,10 @@ def main(argv: list[str] | None = None) -> int:
                 import ray  # noqa: F401
             except ImportError as err:
                 raise ValueError("--backend ray needs Ray: pip install '.[ray]'") from err
+            filtered = [p for p in args.policies if ev.FALL_FILTER in ev.policy_wrappers(p)[1]]
+            if filtered:  # a Ray task gets the checkpoint's bytes only, not the model beside it
+                raise ValueError(f"--backend ray does not carry fall-risk models; run {filtered} with the local "
+                                 "backend")
             check_ray_address(args.ray_address)
         elif args.ray_address is not None:
             raise ValueError("--ray-address needs --backend ray")
