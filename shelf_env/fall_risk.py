@@ -17,7 +17,8 @@ reward. This module learns the risk directly, as a supervised problem with dense
   safe probe with probability ``explore``), so episodes reach the cluttered states of late steps.
 - `train_fall_risk` fits a `FallRiskModel` (the residual FCN of Fig. 4, one logit per cell, started
   from a P+S model's pick FCN) with a binary cross-entropy at the probed cells only, mirrored
-  images as augmentation, and picks the decision threshold on held-out training episodes.
+  images and renamed classes (`shelf_env.symmetry`) as augmentation; it keeps the epoch and picks
+  the decision threshold that do best on held-out training episodes.
 - `FallFilter` wraps a policy at test time: it masks out the pick cells whose predicted risk is
   over the threshold, and the policy chooses among the rest (a Q-map policy: its best remaining
   action, a push where every pick is masked). It reads only the observation, so a robot can run
@@ -49,6 +50,7 @@ from sb3_pixeldqn.networks import DEFAULT_WIDTHS, ResidualFCN
 from shelf_env import params
 from shelf_env.heuristics import ObservationView
 from shelf_env.lookahead import LookaheadDistance, probe_step
+from shelf_env.symmetry import PermuteClasses
 
 #: The filter model evaluations load for ``<policy>+fall-filter`` (`shelf_env.evaluation`).
 DEFAULT_MODEL = "examples/pretrained/fall_risk.pt"
@@ -273,14 +275,15 @@ def make_split(episodes: list[dict[str, np.ndarray]]) -> Split:
     return Split(th.cat(obs), th.cat(state), th.cat(cell), th.cat(label))
 
 
-def logits_at(model: FallRiskModel, obs: th.Tensor, cells: th.Tensor, mirror: bool = False) -> th.Tensor:
-    """The model's logit at each (observation, flat cell), optionally on mirrored images (left-right)."""
+def logits_at(model: FallRiskModel, obs: th.Tensor, index: th.Tensor, cells: th.Tensor,
+              mirror: bool = False) -> th.Tensor:
+    """The model's logit at each (observation ``obs[index[k]]``, flat cell ``cells[k]``), one FCN pass
+    per observation; with ``mirror`` on the left-right mirrored images (and cells)."""
     width = obs.shape[-1]
     if mirror:
         obs = th.flip(obs, dims=(-1,))
-        rows, cols = cells // width, cells % width
-        cells = rows * width + (width - 1 - cols)
-    return model(obs).flatten(1).gather(1, cells[:, None]).squeeze(1)
+        cells = (cells // width) * width + (width - 1 - cells % width)
+    return model(obs).flatten(1)[index, cells]
 
 
 def scores(model: FallRiskModel, split: Split, chunk: int = 64) -> np.ndarray:
@@ -324,10 +327,10 @@ def pick_threshold(labels: np.ndarray, p: np.ndarray) -> float:
 def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = None, epochs: int = 8,
                     batch: int = 32, lr: float = 3e-4, val_fraction: float = 0.15, seed: int = 0) -> dict[str, Any]:
     """Fit a `FallRiskModel` on the episodes of ``data`` (see the module docstring) and save it to
-    ``out``. The last ``val_fraction`` of the episodes (by file name) are held out: the threshold is
-    chosen there, and the returned report (also in the file's ``info``) gives their AUC, the
-    recall of falls and of safe picks at the threshold. ``init``: a P+S / S zip whose pick FCN
-    starts the model."""
+    ``out``. The last ``val_fraction`` of the episodes (by file name) are held out: the epoch whose
+    weights rank their probes best (AUC) is kept and the threshold is chosen there. The returned
+    report (also the file's ``info``) gives their AUC and the recall of falls and of safe picks at
+    the threshold. ``init``: a P+S / S zip whose pick FCN starts the model."""
     if epochs < 1 or batch < 1 or not 0 < val_fraction < 1:
         raise ValueError(f"need epochs >= 1, batch >= 1 and 0 < val_fraction < 1; got {epochs}, {batch}, "
                          f"{val_fraction}")
@@ -348,7 +351,9 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
     optimizer = th.optim.Adam(model.parameters(), lr=lr, weight_decay=2e-5)
     rng = np.random.default_rng(seed)
     states = np.arange(len(train.obs))
-    history = []
+    permute = PermuteClasses()
+    history: list[dict[str, float]] = []
+    best: tuple[float, int, dict[str, th.Tensor]] = (-1.0, epochs, {})
     for epoch in range(epochs):
         model.train()
         losses = []
@@ -358,8 +363,12 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
                 continue
             local = {int(s): i for i, s in enumerate(chunk)}
             idx = th.as_tensor([local[int(s)] for s in train.state[sel]])
+            images = train.obs[th.as_tensor(chunk)]
+            perm = rng.permutation(3)
+            if (perm != np.arange(3)).any():  # falls do not depend on a class: rename the classes
+                images = th.as_tensor(np.stack([permute.observation(o, perm) for o in images.numpy()]))
             mirror = bool(rng.random() < 0.5)
-            logits = logits_at(model, train.obs[th.as_tensor(chunk)][idx], train.cell[sel], mirror)
+            logits = logits_at(model, images, idx, train.cell[sel], mirror)
             loss = F.binary_cross_entropy_with_logits(logits, train.label[sel], pos_weight=pos_weight)
             optimizer.zero_grad()
             loss.backward()
@@ -369,6 +378,10 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
         p = scores(model, val)
         history.append({"epoch": epoch + 1, "train_loss": float(np.mean(losses)), "val_auc": auc(val.label.numpy(), p)})
         print(json.dumps(history[-1]), flush=True)
+        if history[-1]["val_auc"] > best[0]:  # keep the epoch that ranks held-out picks best
+            best = (history[-1]["val_auc"], epoch + 1, {k: v.clone() for k, v in model.state_dict().items()})
+    if best[2]:  # (with no held-out fall to rank, the AUC is undefined and the last epoch stays)
+        model.load_state_dict(best[2])
     p, labels = scores(model, val), val.label.numpy()
     model.threshold = pick_threshold(labels, p)
     flagged = p >= model.threshold
@@ -378,9 +391,38 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
               "val_auc": auc(labels, p), "threshold": model.threshold,
               "val_recall_invalid": float(flagged[labels == 1].mean()) if (labels == 1).any() else float("nan"),
               "val_recall_valid": float((~flagged[labels == 0]).mean()) if (labels == 0).any() else float("nan"),
-              "epochs": epochs, "init": init, "history": history}
+              "epochs": epochs, "best_epoch": best[1],
+              "init": init, "history": history}
     model.save(out, report)
     return report
+
+
+def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
+                 val_fraction: float = 0.15) -> dict[str, Any]:
+    """What the filter does to a model's choice on the held-out episodes of ``data`` (the split of
+    `train_fall_risk`): at each state, the pick the model values most among the probed cells, and
+    the one it values most among those the filter keeps (itself where none is kept), with the
+    share of each that ended the episode invalid in the forked copy, beside the share of all probes."""
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    episodes = load_dataset(data)
+    val = episodes[-max(1, int(round(len(episodes) * val_fraction))):]
+    model = PixelDoubleDQN.load(checkpoint, device="cpu")
+    pick = [name for name, _ in model.policy.maps].index("pick")
+    greedy, filtered, states = [], [], 0
+    for ep in val:
+        for t, obs in enumerate(ep["obs"]):
+            probes = ep["probes"][ep["probes"][:, 0] == t]
+            if not len(probes):
+                continue
+            q = model.policy.q_map_values(obs)[pick][probes[:, 1], probes[:, 2]]
+            kept = risk.risk(obs)[probes[:, 1], probes[:, 2]] < risk.threshold
+            greedy.append(probes[int(np.argmax(q)), 3])
+            filtered.append(probes[int(np.argmax(np.where(kept, q, -np.inf))), 3] if kept.any() else greedy[-1])
+            states += 1
+    labels = np.concatenate([ep["probes"][:, 3] for ep in val])
+    return {"checkpoint": checkpoint, "val_states": states, "probes_invalid": float(labels.mean()),
+            "greedy_invalid": float(np.mean(greedy)), "filtered_invalid": float(np.mean(filtered))}
 
 
 class FallFilter:
@@ -448,7 +490,19 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--init", default="examples/pretrained/p_s.zip", help="zip whose pick FCN starts it ('none')")
     t.add_argument("--epochs", type=int, default=8)
     t.add_argument("--batch", type=int, default=32)
+    k = sub.add_parser("check", help="the filter's effect on a model's choice among the probed picks, held out")
+    k.add_argument("--data", type=pathlib.Path, required=True)
+    k.add_argument("--model", type=pathlib.Path, required=True, help="the fall-risk model (.pt)")
+    k.add_argument("--checkpoint", required=True, help="the P+S / S zip whose choice is filtered")
+    k.add_argument("--out", type=pathlib.Path, default=None, help="also write the result here (JSON)")
     args = parser.parse_args(argv)
+    if args.command == "check":
+        result = greedy_check(args.data, FallRiskModel.load(args.model), args.checkpoint)
+        text = json.dumps(result, indent=1) + "\n"
+        print(text, end="")
+        if args.out is not None:
+            write_atomically(args.out, functools.partial(pathlib.Path.write_text, data=text))
+        return 0
     if args.command == "collect":
         model = None if args.model == "none" else args.model
         collect(args.out, args.episodes, args.shard, tuple(args.ns), model, args.object_set, args.explore, args.hours)

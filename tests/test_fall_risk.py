@@ -194,3 +194,41 @@ def test_the_evaluation_plays_a_checkpoint_under_its_fall_filter(tmp_path):
     fr.FallRiskModel(4, (4, 8, 8), threshold=0.9).save(ev.fall_filter_path(zip_path))  # another filter
     with pytest.raises(ValueError, match="holds cells of another"):
         ev.check_cell_owner(tmp_path / "out", [policy])
+
+
+class OracleRisk:
+    """Flags exactly the probed cells that were invalid (a perfect filter on the collected states)."""
+
+    threshold = 0.5
+
+    def __init__(self, episodes):
+        self.maps = {}
+        for ep in episodes:
+            for t, obs in enumerate(ep["obs"]):
+                risk = np.zeros(obs.shape[1:])
+                probes = ep["probes"][ep["probes"][:, 0] == t]
+                risk[probes[:, 1], probes[:, 2]] = probes[:, 3]
+                self.maps[obs.tobytes()] = risk
+
+    def risk(self, obs):
+        return self.maps[np.asarray(obs).tobytes()]
+
+
+def test_greedy_check_reads_the_models_choice_with_and_without_the_filter(tmp_path):
+    """On collected episodes: an untrained model's choice among the probed picks, unfiltered and
+    filtered; a filter that flags nothing changes nothing, a perfect one leaves only the states
+    where every probed pick was invalid."""
+    fr.collect(tmp_path / "data", episodes=3, ns=(5,), model_path=None)
+    env = gym.make("ShelfSort-v0")
+    PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0), ("push", 0), ("push", 180)],
+                                                        widths=(4, 8, 8)), seed=0).save(tmp_path / "p.zip")
+    env.close()
+    episodes = fr.load_dataset(tmp_path / "data")
+    val = episodes[-1:]  # 15 % of 3 episodes rounds to one
+    none = fr.greedy_check(tmp_path / "data", FixedRisk(np.zeros((80, 120))), str(tmp_path / "p.zip"))
+    assert none["val_states"] == len(val[0]["obs"]) and none["filtered_invalid"] == none["greedy_invalid"]
+    assert none["probes_invalid"] == pytest.approx(val[0]["probes"][:, 3].mean())
+    oracle = fr.greedy_check(tmp_path / "data", OracleRisk(val), str(tmp_path / "p.zip"))
+    all_invalid = [bool(val[0]["probes"][val[0]["probes"][:, 0] == t, 3].all()) for t in range(len(val[0]["obs"]))]
+    assert oracle["filtered_invalid"] == pytest.approx(np.mean(all_invalid))
+    assert oracle["greedy_invalid"] == none["greedy_invalid"]
