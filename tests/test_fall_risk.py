@@ -232,3 +232,13 @@ def test_greedy_check_reads_the_models_choice_with_and_without_the_filter(tmp_pa
     all_invalid = [bool(val[0]["probes"][val[0]["probes"][:, 0] == t, 3].all()) for t in range(len(val[0]["obs"]))]
     assert oracle["filtered_invalid"] == pytest.approx(np.mean(all_invalid))
     assert oracle["greedy_invalid"] == none["greedy_invalid"]
+
+
+def test_the_command_line_names_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
+    assert fr.main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "m.pt")]) == 2
+    assert "no collected episodes" in capsys.readouterr().err and not (tmp_path / "m.pt").exists()
+    missing = str(tmp_path / "x.zip")
+    assert fr.main(["collect", "--out", str(tmp_path / "d"), "--episodes", "1", "--model", missing]) == 2
+    assert "neither one of" in capsys.readouterr().err and not (tmp_path / "d").exists()
+    assert fr.main(["check", "--data", str(tmp_path), "--model", str(tmp_path / "m.pt"), "--checkpoint", "p.zip"]) == 2
+    assert "does not exist" in capsys.readouterr().err
