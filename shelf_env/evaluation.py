@@ -191,9 +191,10 @@ def check_policy(policy: str, primitives: tuple[str, ...] | None = None) -> tupl
         if name in NAMED_POLICIES:
             raise ValueError(f"{FALL_FILTER} filters a checkpoint's picks with the fall-risk model saved beside it; "
                              f"{name!r} is not a checkpoint")
-        if not fall_filter_path(name).is_file():
-            raise ValueError(f"policy {policy}: no fall-risk model at {fall_filter_path(name)} (python -m "
-                             f"shelf_env.fall_risk train --init {name} --out {fall_filter_path(name)} makes one)")
+        model = fall_filter_path(name)
+        if not model.is_file():
+            raise ValueError(f"policy {policy}: no fall-risk model at {model} (python -m "
+                             f"shelf_env.fall_risk train --init {name} --out {model} makes one)")
     if is_named(policy):
         return primitives or ("pick", "push")
     needed = checkpoint_primitives(name)

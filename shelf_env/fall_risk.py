@@ -51,7 +51,7 @@ import numpy as np
 import torch as th
 import torch.nn.functional as F
 
-from sb3_pixeldqn.files import write_atomically
+from sb3_pixeldqn.files import write_atomically, write_json_atomically
 from sb3_pixeldqn.networks import DEFAULT_WIDTHS, ResidualFCN
 from shelf_env import params
 from shelf_env.heuristics import ObservationView
@@ -69,12 +69,12 @@ def collect_seed(shard: int, episode: int) -> int:
     return int(np.random.SeedSequence([COLLECT_SEED, shard, episode]).generate_state(1)[0])
 
 
-def probe_cells(env: gym.Env, view: ObservationView, greedy: tuple[int, int] | None,
+def probe_cells(hd: LookaheadDistance, view: ObservationView, greedy: tuple[int, int] | None,
                 rng: np.random.Generator, max_probes: int = MAX_PROBES) -> list[tuple[int, int]]:
     """The pick cells to label in one state: H-d's candidates (one per visible unsorted object, or
     the uncovering picks when all look sorted), the driving model's greedy pick, then one random
-    graspable cell per visible object; without repeats, at most ``max_probes``."""
-    hd = LookaheadDistance(env)
+    graspable cell per visible object; without repeats, at most ``max_probes``. ``hd``: the episode's
+    H-d lookahead (only its candidate lists are used here, no probe)."""
     cells = hd.candidates(view) or hd.uncover_candidates(view)
     if greedy is not None:
         cells.append(greedy)
@@ -96,12 +96,12 @@ def collect_episode(env: gym.Env, model: Any, reset_seed: int, rng: np.random.Ge
     """
     base: Any = env.unwrapped
     codec = base.codec
-    margin = LookaheadDistance(env).margin_cells
+    hd = LookaheadDistance(env)
     obs, _ = env.reset(seed=reset_seed)
     observations: list[np.ndarray] = []
     probes: list[tuple[int, int, int, int]] = []
     for _ in range(base.max_actions):
-        view = ObservationView.from_observation(obs, margin)
+        view = ObservationView.from_observation(obs, hd.margin_cells)
         if not view.graspable.any():
             break
         greedy_action = None
@@ -113,7 +113,7 @@ def collect_episode(env: gym.Env, model: Any, reset_seed: int, rng: np.random.Ge
         if greedy_action is not None:
             name, row, col = codec.decode(greedy_action)
             greedy = (row, col) if name == "pick" else None
-        cells = probe_cells(env, view, greedy, rng, max_probes)
+        cells = probe_cells(hd, view, greedy, rng, max_probes)
         safe = []
         for row, col in cells:
             invalid = not probe_step(env, codec.encode("pick", row, col)).valid
@@ -504,10 +504,9 @@ def main(argv: list[str] | None = None) -> int:
     try:  # a bad input is one line on stderr and exit status 2, before anything is written
         if args.command == "check":
             result = greedy_check(args.data, FallRiskModel.load(args.model), args.checkpoint)
-            text = json.dumps(result, indent=1) + "\n"
-            print(text, end="")
+            print(json.dumps(result, indent=1))
             if args.out is not None:
-                write_atomically(args.out, functools.partial(pathlib.Path.write_text, data=text))
+                write_json_atomically(args.out, result)
         elif args.command == "collect":
             model = None if args.model == "none" else args.model
             collect(args.out, args.episodes, args.shard, tuple(args.ns), model, args.object_set, args.explore,
