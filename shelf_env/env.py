@@ -112,6 +112,9 @@ from shelf_env.robot import DragWatch, Primitives, Robot, carry_height
 from shelf_env.world import Physics, Region, World, sample_regions
 
 SPAWN_TRIES = 100
+#: What (scene seed, actions) produce: bump it whenever a change alters any episode's observations,
+#: rewards or infos, so that data labelled by an older env (`shelf_env.dataset`) is refused.
+DYNAMICS_VERSION = 1
 __all__ = ["PRIMITIVES", "ShelfSortEnv", "map_names"]
 
 

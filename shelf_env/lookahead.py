@@ -73,6 +73,8 @@ class Outcome:
     obs_sha256: str  # digest of the next observation, to check that the copy is exact
     #: the next observation itself (None where an Outcome is made by hand); not compared
     next_obs: np.ndarray | None = field(default=None, compare=False, repr=False)
+    #: objects in their own class's region after the step (``info["num_sorted"]``); None where made by hand
+    num_sorted: int | None = None
 
     @property
     def valid(self) -> bool:
@@ -108,7 +110,7 @@ def probe_step(env: gym.Env, action: int) -> Outcome:
             os.close(read_fd)
             obs, reward, terminated, _, info = base.step(int(action))
             payload = {"reward": float(reward), "terminated": bool(terminated), "fell": bool(info["fell"]),
-                       "is_success": bool(info["is_success"]),
+                       "is_success": bool(info["is_success"]), "num_sorted": int(info["num_sorted"]),
                        "obs_sha256": digest(obs), "next_obs": np.asarray(obs)}
         except BaseException as err:  # noqa: BLE001  (reported to the parent, which raises it)
             payload, status = {"error": f"{type(err).__name__}: {err}"}, 1

@@ -1,0 +1,113 @@
+"""The teacher dataset: shards resume, every label is what stepping its action really does, bad shards are
+refused by name, and a collection stopped mid-shard leaves nothing behind."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+import numpy as np
+import pytest
+
+from shelf_env import dataset
+
+MODEL = "examples/pretrained/p_s.zip"
+
+
+@pytest.fixture(scope="module")
+def one_shard(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
+    out = tmp_path_factory.mktemp("teacher")
+    assert dataset.collect(out, hours=1.0, ns=(2,), model_path=MODEL, episodes_per_shard=1, max_shards=1,
+                           max_probes=8) == 1
+    return out
+
+
+def test_shard_holds_states_labels_and_the_scene(one_shard: pathlib.Path) -> None:
+    shard = dataset.load_shard(dataset.shard_path(one_shard, 0, 0))
+    a = shard.arrays
+    assert shard.num_states >= 1 and shard.num_labels > shard.num_states  # several labels per state
+    assert a["obs"].dtype == np.uint8 and a["obs"].shape[1:] == (4, 40, 60)
+    assert shard.meta["episodes"][0]["num_objects"] == 2
+    for t in range(shard.num_states):  # the model's greedy action is labelled in every state, once
+        sources = [dataset.SOURCES[i] for i in a["label_source"][a["label_state"] == t]]
+        assert sources.count("greedy") == 1
+    for t in range(shard.num_states):  # the teacher's choice is labelled in its state, at most max_probes + 1
+        labelled = a["label_action"][a["label_state"] == t]
+        assert a["teacher_action"][t] in labelled and len(labelled) <= 9
+    executed = [int(x) for x in a["executed_action"] if x >= 0]
+    assert executed == shard.meta["episodes"][0]["actions"]
+
+
+def test_every_label_equals_a_real_step(one_shard: pathlib.Path) -> None:
+    shard = dataset.load_shard(dataset.shard_path(one_shard, 0, 0))
+    states, labels, mismatches = dataset.replay_states(shard)
+    assert mismatches == []
+    assert (states, labels) == (shard.num_states, shard.num_labels)
+
+
+def test_collection_resumes_without_redoing_shards(one_shard: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    first = dataset.shard_path(one_shard, 0, 0)
+    out = tmp_path / "teacher"
+    out.mkdir()
+    (out / first.name).write_bytes(first.read_bytes())
+    assert dataset.collect(out, ns=(2,), model_path=None, episodes_per_shard=1, max_shards=1, max_probes=4) == 0
+    assert dataset.collect(out, ns=(2,), model_path=None, episodes_per_shard=1, max_shards=2, max_probes=4) == 1
+    assert (out / first.name).read_bytes() == first.read_bytes()
+    assert [p.name for p in dataset.shard_files(out)] == ["s00_00000.npz", "s00_00001.npz"]
+    text = dataset.status(out)
+    assert "2 shards, 2 scenes" in text and "| 2 | 2 |" in text
+
+
+def test_a_collection_killed_mid_shard_leaves_nothing(tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def killed(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(dataset, "collect_episode", killed)
+    with pytest.raises(KeyboardInterrupt):
+        dataset.collect(tmp_path, ns=(1,), model_path=None, max_shards=1)
+    assert list(tmp_path.iterdir()) == []
+
+    def torn(path: pathlib.Path, **kwargs: object) -> None:
+        path.write_bytes(b"PK\x03\x04 half a shard")
+        raise KeyboardInterrupt
+
+    monkeypatch.undo()
+    monkeypatch.setattr(dataset, "save_shard", torn)
+    with pytest.raises(KeyboardInterrupt):
+        dataset.collect(tmp_path, ns=(1,), model_path=None, episodes_per_shard=1, max_shards=1, max_probes=2)
+    assert list(tmp_path.iterdir()) == []
+
+
+def rewrite(src: pathlib.Path, dst: pathlib.Path, **meta_changes: object) -> pathlib.Path:
+    with np.load(src) as data:
+        arrays = {k: data[k] for k in data.files}
+    meta = json.loads(str(arrays.pop("meta")))
+    meta.update(meta_changes)
+    np.savez_compressed(dst, meta=np.array(json.dumps(meta)), **arrays)
+    return dst
+
+
+def test_bad_shards_are_refused_by_name(one_shard: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    good = dataset.shard_path(one_shard, 0, 0)
+    truncated = tmp_path / "s00_00000.npz"
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    with pytest.raises(ValueError, match=f"{truncated}.*unreadable"):
+        dataset.load_dataset(tmp_path)
+    other_env = rewrite(good, tmp_path / "s00_00001.npz", dynamics_version=dataset.DYNAMICS_VERSION + 1)
+    with pytest.raises(ValueError, match=f"{other_env}.*dynamics version"):
+        dataset.load_shard(other_env)
+    five_mm = {"obs_shape": [4, 80, 120], "pixel_size": 0.005, "map_names": ["pick", "push_left", "push_right"]}
+    with pytest.raises(ValueError, match="s00_00000.npz: observation layout"):
+        dataset.load_shard(good, expect_layout=five_mm)
+    with pytest.raises(ValueError, match="format"):
+        dataset.load_shard(rewrite(good, tmp_path / "s00_00002.npz", format=0))
+    with pytest.raises(ValueError, match="no dataset shards"):
+        dataset.load_dataset(tmp_path / "empty")
+
+
+def test_bad_collect_arguments_are_one_line_errors(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path) -> None:
+    assert dataset.main(["collect", "--out", str(tmp_path), "--ns", "0"]) == 2
+    assert "ns must be numbers of objects" in capsys.readouterr().err
+    assert dataset.main(["collect", "--out", str(tmp_path), "--model", str(tmp_path / "missing.zip")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
