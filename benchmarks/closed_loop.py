@@ -3,7 +3,7 @@
     python benchmarks/closed_loop.py [--ns 3,8,14] [--scenes 2] [--seed 0] [--policy h-a]
 
 For each N it plays ``--scenes`` of the evaluation protocol's held-out YCB scenes
-(`shelf_env.evaluation.scene_seed`) greedily with ``--policy`` under three conditions, scene by
+(`shelf_env.evaluation.protocol.scene_seed`) greedily with ``--policy`` under three conditions, scene by
 scene so that all three see the same machine load: the open loop (the env's default), the closed
 loop with its defaults (``closed_loop=True``) and the closed loop with ``safe_picks=True`` (issue
 13's recommended setting). It prints the wall time of ``env.step`` per action (the policy's own
@@ -22,7 +22,7 @@ import gymnasium as gym
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from shelf_env import params
-from shelf_env.evaluation import make_env, make_policy, run_episode, scene_seed
+from shelf_env.evaluation.protocol import make_env, make_policy, run_episode, scene_seed
 
 CONDITIONS: dict[str, dict] = {
     "open": {},

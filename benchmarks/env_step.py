@@ -13,7 +13,7 @@ during the motion, the motion's own computation (IK, motor commands, contact che
 while the scene settles, the camera render, the heightmap (point cloud, cells, recolouring) and
 the rest (task rules, masks, bookkeeping).
 
-``--compare [OLD NEW]`` (default ``reference fast``, see `shelf_env.world.PHYSICS`; a setting may
+``--compare [OLD NEW]`` (default ``reference fast``, see `shelf_env.world.cabinet.PHYSICS`; a setting may
 also be given as ITERATIONS:RESIDUAL:SKIP, e.g. 20:1e-5:1) times one action under two physics
 settings in one run: for each of ``--scenes`` scenes per N, random actions on object pixels are
 drawn and run under OLD, then the same action indices are replayed under NEW from the same scene,
@@ -29,7 +29,7 @@ import numpy as np
 import pybullet as pb
 
 from shelf_env.env import ShelfSortEnv
-from shelf_env.world import Physics
+from shelf_env.world.cabinet import Physics
 
 
 class Timed:

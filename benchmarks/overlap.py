@@ -2,7 +2,7 @@
 
     python benchmarks/overlap.py [--ns 3 8] [--steps 100] [--threads 2]
 
-For each N, the recipe's training loop (`shelf_env.training.PRESETS["recipe"]`, what `shelf-train`
+For each N, the recipe's training loop (`shelf_env.training.config.PRESETS["recipe"]`, what `shelf-train`
 runs) two ways on the same two cores, one after the other, each timed over ``--steps`` env steps
 after its ``learning_starts``:
 
@@ -15,7 +15,7 @@ after its ``learning_starts``:
   ratio (one gradient step per transition; the actor waits when ``actor_max_lag`` ahead).
 
 Prints env steps per hour of each and the ratio. The issue adopts the actor only if the ratio is
-at least 1.3 (docs/learning.md, lever 9).
+at least 1.3 (docs/experiments/learning-recipe.md, lever 9).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import time
 import torch as th
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
-from shelf_env.training import make_actor_env
+from shelf_env.training.config import make_actor_env
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from train_loop import prepared_model, timed_steps  # noqa: E402  (shared with the sequential measurement)

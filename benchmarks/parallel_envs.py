@@ -4,7 +4,7 @@
 
 For each N and each number of envs K, the ``p_s`` preset's training loop (what
 ``shelf-train --preset p_s --n-envs K`` runs: the learning recipe, P+S) at N objects: K env
-processes (`shelf_env.training.make_parallel_env`; K = 1 is the ordinary in-process env), the
+processes (`shelf_env.training.config.make_parallel_env`; K = 1 is the ordinary in-process env), the
 learner on ``--device`` (SB3's; ``auto`` takes the GPU when there is one), K gradient steps after
 each collection step of the K envs, so that every K trains one gradient step per env step. After
 the buffer's warm-up (``learning_starts`` steps), the loop runs for ``--seconds`` and the script
@@ -25,7 +25,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
-from shelf_env.training import PRESETS, demo_policy, make_env, make_model, use_parallel_envs
+from shelf_env.training.config import PRESETS, demo_policy, make_env, make_model, use_parallel_envs
 
 
 class StopAfter(BaseCallback):

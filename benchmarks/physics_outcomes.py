@@ -3,10 +3,10 @@
     python benchmarks/physics_outcomes.py [--new fast] [--ns 3 8 14] [--runs 10] [--seed 7]
                                           [--policies h-d h-a] [--out results/physics/outcomes.json]
 
-A cheaper action (`shelf_env.world.Physics`) must leave what happens unchanged, but Bullet is
+A cheaper action (`shelf_env.world.cabinet.Physics`) must leave what happens unchanged, but Bullet is
 chaotic: any change at all, even a harmless one, sends a cluttered episode down another path. So
 the comparison has a yardstick. Every (policy, N, run) scene of the evaluation protocol
-(`shelf_env.evaluation.scene_seed`, YCB objects) is played three times:
+(`shelf_env.evaluation.protocol.scene_seed`, YCB objects) is played three times:
 
 - ``reference``: ``physics="reference"``, the physics every earlier result used;
 - ``chaos``: the same, with every object spawned 0.1 mm deeper into the cabinet, a change that
@@ -31,9 +31,9 @@ import numpy as np
 
 import shelf_env  # noqa: F401
 from sb3_pixeldqn.files import write_json_atomically
-from shelf_env import world
-from shelf_env.evaluation import make_policy, run_episode, scene_seed
-from shelf_env.world import Physics
+from shelf_env.evaluation.protocol import make_policy, run_episode, scene_seed
+from shelf_env.world import cabinet as world
+from shelf_env.world.cabinet import Physics
 
 SHIFT = 1e-4  # m, the chaos yardstick's nudge
 

@@ -2,7 +2,7 @@
 
     python benchmarks/sleeping.py [--n 8] [--episodes 4] [--object-set ycb]
 
-Plays H-d (`shelf_env.heuristics.DistanceHeuristic`) from the same seeded scenes twice, once with
+Plays H-d (`shelf_env.baselines.heuristics.DistanceHeuristic`) from the same seeded scenes twice, once with
 ``sleeping=False`` (every object simulated at every physics step) and once with ``sleeping=True``
 (the default: objects at rest sleep until touched), alternating the two modes episode by episode so
 that both see the same machine load. Prints seconds per action (whole episodes, reset
@@ -18,8 +18,8 @@ import time
 import gymnasium as gym
 
 import shelf_env  # noqa: F401
-from shelf_env.evaluation import run_episode
-from shelf_env.heuristics import DistanceHeuristic
+from shelf_env.baselines.heuristics import DistanceHeuristic
+from shelf_env.evaluation.protocol import run_episode
 
 
 def play(env: gym.Env, seed: int) -> tuple[float, int, int, tuple[bool, int, bool]]:

@@ -2,7 +2,7 @@
 
     python benchmarks/train_loop.py [--steps 150] [--rounds 2] [--threads 2] [--n 3]
 
-Each configuration (`shelf_env.training.PRESETS`: ``recipe`` and ``issue3``) trains at N objects
+Each configuration (`shelf_env.training.config.PRESETS`: ``recipe`` and ``issue3``) trains at N objects
 for ``--steps`` env steps after its ``learning_starts``, in ``--rounds`` interleaved rounds (so
 that a change in the machine's load hits both), and the script prints seconds per env step,
 env steps per hour and the ratio recipe / issue 3. Demonstration collection is timed separately
@@ -20,7 +20,7 @@ import torch as th
 from stable_baselines3.common.logger import configure
 
 import shelf_env  # noqa: F401
-from shelf_env.training import PRESETS, demo_policy, make_env, make_model
+from shelf_env.training.config import PRESETS, demo_policy, make_env, make_model
 
 
 def prepared_model(preset: str, n: int, seed: int) -> tuple[Any, Any, Any, float]:

@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
-from shelf_env.camera import CLASS_RGB, REGION_RGB
+from shelf_env.camera.heightmap import CLASS_RGB, REGION_RGB
 
 
 def scripted_pick(obs: np.ndarray) -> int:

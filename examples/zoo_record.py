@@ -10,7 +10,7 @@ and ignores the run's ``env_kwargs``; they are read from the run's ``config.yml`
 import runpy
 import sys
 
-from shelf_env.zoo import register, saved_env_kwargs
+from shelf_env.training.zoo import register, saved_env_kwargs
 
 if __name__ == "__main__":
     register()

@@ -4,12 +4,12 @@
         -conf examples/hyperparams/pixel_double_dqn.yml [any rl-zoo3 train option]
 
 Saves where rl-zoo3 saves (``logs/pixel_double_dqn/ShelfSort-v0_<id>/``). Needs the ``zoo`` extra
-(``pip install ".[zoo]"``). See `shelf_env.zoo`.
+(``pip install ".[zoo]"``). See `shelf_env.training.zoo`.
 """
 
 from rl_zoo3.train import train
 
-from shelf_env.zoo import register
+from shelf_env.training.zoo import register
 
 if __name__ == "__main__":
     register()

@@ -11,6 +11,8 @@ from sb3_pixeldqn.loop_breaker import LoopBreaker
 from sb3_pixeldqn.pixel_dqn import PixelDoubleDQN
 from sb3_pixeldqn.policies import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, FCNPolicy
 
+__version__ = "0.1.0"
+
 __all__ = [
     "PICK_AND_PUSH_MAPS",
     "PICK_ONLY_MAPS",

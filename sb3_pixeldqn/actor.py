@@ -6,7 +6,7 @@ model's env, a second process holds the env and a CPU copy of the Q-network and 
 ε-greedy (masked) policy on its own, while `PixelDoubleDQN.learn` consumes its transitions in order,
 stores them and trains exactly as it would have after stepping the env itself
 (`benchmarks/overlap.py` measured 1.48× the env steps per hour at N = 3 and 1.66× at N = 8 on two
-cores, docs/learning.md lever 9).
+cores, docs/experiments/learning-recipe.md lever 9).
 
 - **Same replay ratio.** The actor runs at most ``max_lag`` transitions ahead of those the learner
   has consumed, and the learner trains ``gradient_steps`` per ``train_freq`` consumed steps, so the
@@ -51,6 +51,8 @@ from stable_baselines3.common.env_util import is_wrapped
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import CloudpickleWrapper, VecEnvIndices, VecEnvStepReturn
+
+from sb3_pixeldqn.exploration import draw_masked_action
 
 #: The learner sends ε again when it moved by more than this since the last time.
 EPSILON_SYNC = 0.02
@@ -310,8 +312,6 @@ class _Actor:
         self.rng = np.random.default_rng()
         self.running = False
         self.produced = 0
-        from sb3_pixeldqn.pixel_dqn import draw_masked_action  # here: pixel_dqn imports this module
-
         self.draw_masked = draw_masked_action
 
     def handle(self, command: str, payload: Any) -> bool:

@@ -3,7 +3,7 @@
 A greedy policy is a function of the observation. Suppose an action leaves the observation
 unchanged, or changes it so little that the same pixel stays best (a pick that lifts nothing, a
 push against a wall). Then the policy chooses that action again and again until the episode runs
-out of actions. These are the evaluation's ``loop`` failures (`shelf_env.evaluation.FAILURES`).
+out of actions. These are the evaluation's ``loop`` failures (`shelf_env.evaluation.protocol.FAILURES`).
 `LoopBreaker` wraps any policy whose ``predict`` takes sb3-contrib's ``action_masks`` (a
 `PixelDoubleDQN`, a MaskablePPO, shelf_env's heuristics) and masks out the places it has already
 acted at too often in the episode.
@@ -24,7 +24,7 @@ action it returns is executed, and the wrapped policy is memoryless (a DQN's ``s
 
 It reads nothing but its own actions: a robot can run it. It is not learned. It changes what the
 policy does, so results with it are reported under their own policy name
-(``"<policy>+loop-breaker"`` in `shelf_env.evaluation`).
+(``"<policy>+loop-breaker"`` in `shelf_env.evaluation.protocol`).
 
 With ``acts_masked`` False the wrapped policy gets no env masks from an evaluation. This holds for a
 model trained with ``masked=False`` and for shelf_env's heuristics. It then gets the cells not
@@ -88,7 +88,7 @@ class LoopBreaker:
 
     @property
     def acts_masked(self) -> bool:
-        """Whether the wrapped policy acts with the env's masks (`shelf_env.evaluation.takes_action_masks`)."""
+        """Whether the wrapped policy acts with the env's masks (`shelf_env.evaluation.protocol.takes_action_masks`)."""
         return bool(getattr(self.policy, "acts_masked", True))
 
     def reset(self) -> None:

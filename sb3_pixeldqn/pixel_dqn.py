@@ -79,6 +79,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_pixeldqn.actor import ActingRules, ActorVecEnv
 from sb3_pixeldqn.buffers import CORRECTION_KEY, HindsightRelabelReplayBuffer, TransitionBatch
+from sb3_pixeldqn.exploration import draw_masked_action
 from sb3_pixeldqn.files import write_atomically
 from sb3_pixeldqn.policies import FCNPolicy, PixelQNetwork, check_action_masks, describe_layout, masked_argmax
 
@@ -371,7 +372,7 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
         violators). DQfD's ``max_a [Q(s, a) + margin * (a != a_E)] - Q(s, a_E)`` penalises only the
         one largest action: on a map of thousands of pixels a flat Q-map is then a trap (the loss
         sits at the margin and its gradient reaches one pixel at a time) — measured in
-        docs/learning.md, where the pick map of three runs went flat with it.
+        docs/experiments/learning-recipe.md, where the pick map of three runs went flat with it.
         """
         actions = actions.long().reshape(-1, 1)
         q_demo = q_all.gather(1, actions)
@@ -813,19 +814,6 @@ class PixelDoubleDQN(OffPolicyAlgorithm):
                 f"and {env.action_space if env else '?'}."
             ) from err
         return model
-
-
-def draw_masked_action(mask: np.ndarray, n_maps: int, rng: Any) -> int:
-    """One exploratory action from a boolean action mask: a map drawn uniformly among the maps with
-    a useful pixel, then one of its useful pixels, so a primitive with a large mask (pushes) does
-    not crowd out one with a small mask (picks). Uniform over all actions if the mask is empty.
-    ``rng`` is anything with ``choice`` (``np.random`` or a ``np.random.Generator``)."""
-    per_map = np.asarray(mask, dtype=bool).reshape(n_maps, -1)
-    maps = np.flatnonzero(per_map.any(axis=1))
-    if maps.size == 0:
-        return int(rng.choice(per_map.size))
-    m = int(rng.choice(maps))
-    return m * per_map.shape[1] + int(rng.choice(np.flatnonzero(per_map[m])))
 
 
 def _with_suffix(path: str | pathlib.Path, suffix: str) -> pathlib.Path:

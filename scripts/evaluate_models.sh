@@ -21,7 +21,7 @@ shelf-evaluate --policies "${shipped[@]}" h-d h-a --ns 3-14 \
 shelf-evaluate --policies examples/pretrained/p_s.zip --ns 3-14 --runs 30 --seeds 3 \
     --object-sets train ycb --out results/models_train_vs_ycb --reuse-cells results/models "$@"
 # The verdict against issue 10's targets (results/models/report.md: table, margins, failures).
-python -m shelf_env.report results/models
+python -m shelf_env.evaluation.report results/models
 # Where the falls come from: up to 10 fallen episodes per (policy, N) replayed with the motion's
 # phases watched (results/models/falls.md, traces.jsonl).
-python -m shelf_env.traces results/models --policies "${shipped[@]}" h-d h-a --ns 3 5 8 11 14 --limit 10
+python -m shelf_env.evaluation.traces results/models --policies "${shipped[@]}" h-d h-a --ns 3 5 8 11 14 --limit 10

@@ -11,4 +11,4 @@ args=()
 if [ -f results/models/results.json ] && python -c "import json,sys; sys.exit(0 if json.load(open('results/models/results.json'))['config'].get('complete') else 1)"; then
   args+=(--results results/models)
 fi
-python -m shelf_env.ship "${args[@]}" "$@"
+python -m shelf_env.training.ship "${args[@]}" "$@"

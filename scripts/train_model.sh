@@ -3,7 +3,7 @@
 #   bash scripts/train_model.sh p_s     # P+S (pick, push-left, push-right)
 #   bash scripts/train_model.sh s       # S (pick only, the paper's baseline)
 #   bash scripts/train_model.sh p_s --name p_s_safe_actor --set safe_picks=true --actor   # a variant
-# The "p_s" / "s" preset of shelf_env/training.py (the learning recipe through the curriculum
+# The "p_s" / "s" preset of shelf_env/training/config.py (the learning recipe through the curriculum
 # N = 1 -> 8), seed 0, two torch threads, a total budget of --hours of wall clock (default 12, over
 # as many runs of this command as it takes; extra arguments go to shelf-train).
 # The run lives in runs/<name> (with its replay buffer; <name> is the preset unless --name is

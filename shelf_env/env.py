@@ -18,7 +18,7 @@ the back wall and 8 mm from the side walls, where the blade's tip and thickness 
 
 Reward (Eq. 2): -10 if the step leaves the scene invalid (an object outside the cabinet, or not
 at rest 1 s after the motion), 0 if it reaches the sorted state, -1 otherwise. ``terminated`` on
-sorted or invalid, ``truncated`` after ``max_actions`` actions. See `shelf_env.world` for the
+sorted or invalid, ``truncated`` after ``max_actions`` actions. See `shelf_env.world.cabinet` for the
 exact definitions of inside, at rest and in-region.
 
 Action masks (sb3-contrib's convention): `ShelfSortEnv.action_masks` marks the picks and pushes
@@ -31,7 +31,7 @@ ends valid with every object inside some target region but not all in their own,
 recoloured with every object's class replaced by the class of the region it is in, reward 0,
 terminated True. The action is unchanged.
 
-``perception_noise`` (off by default; `shelf_env.perception`): segmentation dropout of whole
+``perception_noise`` (off by default; `shelf_env.conditions.perception_noise`): segmentation dropout of whole
 objects or parts, class flips and depth noise on every capture, seeded per episode; the policy's
 observation, the masks and the env's own planning see the noisy map, rewards the true state.
 
@@ -41,7 +41,7 @@ to the nearest clear way out, or put back where it was picked when there is none
 carry the cup's force sensor and a small camera image watch for a dragged neighbour, and a drag
 they catch makes the robot carry the object back and put it down. When the place's descent stops
 on other objects near the opening, the object is not released there but placed again further in
-(`shelf_env.robot.DragWatch`; a dict of its fields or a DragWatch tunes it); ``info["interventions"]``
+(`shelf_env.conditions.closed_loop.DragWatch`; a dict of its fields or a DragWatch tunes it); ``info["interventions"]``
 lists what it did. With ``safe_picks=True`` as well (the setting to use for the fewest falls) it
 cuts the episodes with a fall at N = 8..14 by 76 % (H-a), 75 % (H-d) and 60 % (the shipped P+S)
 and sorts more at N = 3..5, on issue 10's YCB grid (`results/closed_loop/on_deeper_safe_table.md`).
@@ -49,14 +49,14 @@ It stays off by default: the paper's task is open loop (issue 10's evaluation an
 models), and watching costs 1.5-3x the time per action (`benchmarks/closed_loop.py`).
 
 ``safe_picks=True`` (off by default): `action_masks` leaves out the picks whose object would be
-carried out of the opening through a taller visible neighbour (`shelf_env.clearance`), the motion
+carried out of the opening through a taller visible neighbour (`shelf_env.conditions.safe_picks`), the motion
 that drags most fallen objects out; the heuristics restrict their picks the same way.
 
 ``min_num_objects=k`` (None by default): each reset draws N uniformly from
 [min(k, num_objects), num_objects] (`ShelfSortEnv.episode_size`, from the env's seeded stream)
 instead of always playing ``num_objects``, which a curriculum (`set_num_objects`) then moves as
 the upper end: training on a mix of sizes so that the low N are not forgotten at a high stage
-(`shelf_env.training.TrainConfig.min_num_objects`). ``info["num_objects"]`` gives each
+(`shelf_env.training.config.TrainConfig.min_num_objects`). ``info["num_objects"]`` gives each
 episode's N.
 
 ``progress_reward=c`` (0 by default: the paper's reward, unchanged): a valid step's reward gains
@@ -81,9 +81,9 @@ actions left, 2.9-1.0 % at r = -30 and 0.8-0.25 % at r = -100. A training signal
 
 ``sleeping=True`` (default) lets objects at rest sleep in Bullet between contacts, which makes
 actions cheaper with many objects (`benchmarks/sleeping.py`); ``sleeping=False`` simulates every object at every physics
-step (see `shelf_env.world`).
+step (see `shelf_env.world.cabinet`).
 
-``physics="fast"`` (default; `shelf_env.world.Physics`) caps Bullet's constraint solver at 20
+``physics="fast"`` (default; `shelf_env.world.cabinet.Physics`) caps Bullet's constraint solver at 20
 sweeps with an early exit and does not simulate the arm's motion where nothing can happen;
 ``physics="reference"`` simulates every motion with PyBullet's default solver, the physics of
 every result before 2026-11-23. ``benchmarks/env_step.py --compare`` measures both.
@@ -101,19 +101,22 @@ import gymnasium as gym
 import numpy as np
 import pybullet as pb
 
-from shelf_env import params, task
+from shelf_env import params
 from shelf_env.actions import PRIMITIVES, ActionCodec, clip_target, map_names
-from shelf_env.camera import CLASS_RGB, CameraConfig, HeightmapCamera, recolour, region_masks
-from shelf_env.clearance import carry_clear, carry_path
-from shelf_env.objects import OBJECT_SETS, ObjectSpec, sample_specs
-from shelf_env.perception import PerceptionNoise
-from shelf_env.placement import place_position
-from shelf_env.robot import DragWatch, Primitives, Robot, carry_height
-from shelf_env.world import Physics, Region, World, sample_regions
+from shelf_env.camera.heightmap import CLASS_RGB, CameraConfig, HeightmapCamera, recolour, region_masks
+from shelf_env.conditions.closed_loop import DragWatch, WatchedPrimitives
+from shelf_env.conditions.perception_noise import PerceptionNoise
+from shelf_env.conditions.safe_picks import carry_clear, carry_path
+from shelf_env.robot.arm import Robot, carry_height
+from shelf_env.robot.placement import place_position
+from shelf_env.robot.primitives import Primitives
+from shelf_env.world import task
+from shelf_env.world.cabinet import Physics, Region, World, sample_regions
+from shelf_env.world.objects import OBJECT_SETS, ObjectSpec, sample_specs
 
 SPAWN_TRIES = 100
 #: What (scene seed, actions) produce: bump it whenever a change alters any episode's observations,
-#: rewards or infos, so that data labelled by an older env (`shelf_env.dataset`) is refused.
+#: rewards or infos, so that data labelled by an older env (`shelf_env.privileged.dataset`) is refused.
 DYNAMICS_VERSION = 1
 __all__ = ["PRIMITIVES", "ShelfSortEnv", "map_names"]
 
@@ -214,9 +217,9 @@ class ShelfSortEnv(gym.Env):
             raise ValueError(f"max_objects must be in [1, {params.MAX_OBJECTS}], got {max_objects}")
         if not 0.002 <= pixel_size <= 0.02:
             raise ValueError(f"pixel_size must be in [0.002, 0.02] m, got {pixel_size}")
-        #: `shelf_env.perception.PerceptionNoise` applied to every capture (None: exact perception).
+        #: `shelf_env.conditions.perception_noise.PerceptionNoise` applied to every capture (None: exact perception).
         self.perception_noise = PerceptionNoise.from_any(perception_noise)
-        #: `shelf_env.robot.DragWatch` of the carried object (None: open loop, as in the paper).
+        #: `shelf_env.conditions.closed_loop.DragWatch` of the carried object (None: open loop, as in the paper).
         self.drag_watch = DragWatch.from_any(closed_loop)
         if not isinstance(safe_picks, bool):
             raise ValueError(f"safe_picks must be True or False, got {safe_picks!r}")
@@ -243,7 +246,7 @@ class ShelfSortEnv(gym.Env):
         self.render_mode = render_mode
 
         self.sleeping = bool(sleeping)
-        #: How much is simulated (`shelf_env.world.Physics`): "fast" (default) or "reference".
+        #: How much is simulated (`shelf_env.world.cabinet.Physics`): "fast" (default) or "reference".
         self.physics = Physics.named(physics)
         self.client = pb.connect(pb.DIRECT)
         cfg = camera or CameraConfig()
@@ -311,12 +314,16 @@ class ShelfSortEnv(gym.Env):
         pb.resetSimulation(physicsClientId=self.client)
         self.world = World(self.client, sleeping=self.sleeping, physics=self.physics)
         self.robot = Robot(self.client, skip_free_motion=self.physics.skip_free_motion)
-        self.primitive_runner = Primitives(self.robot, watch=self.drag_watch,
-                                           look=None if self.watch_camera is None else self.watch_camera.front_edges)
-        if self.drag_watch is not None and self.drag_watch.lane:
-            self.primitive_runner.plan_carry = self._carry_shift
-        if self.drag_watch is not None and self.drag_watch.place_check:
-            self.primitive_runner.plan_place = functools.partial(self._place_for, min_front=self.drag_watch.stack_front)
+        if self.drag_watch is None:  # the paper's open loop
+            self.primitive_runner = Primitives(self.robot)
+        else:  # the closed loop: the same primitives, watched (shelf_env.conditions.closed_loop)
+            watched = WatchedPrimitives(self.robot, self.drag_watch,
+                                        look=None if self.watch_camera is None else self.watch_camera.front_edges)
+            if self.drag_watch.lane:
+                watched.plan_carry = self._carry_shift
+            if self.drag_watch.place_check:
+                watched.plan_place = functools.partial(self._place_for, min_front=self.drag_watch.stack_front)
+            self.primitive_runner = watched
         for camera in (getattr(self, "camera", None), self.watch_camera):
             if camera is not None:  # same bodies in the same order: same ids, but say so rather than assume
                 camera.hidden_bodies = self.world.decorative
@@ -425,7 +432,7 @@ class ShelfSortEnv(gym.Env):
     def step(self, action):
         """One action, as the paper's pipeline (§IV-B, Eq. 2): decode the pixel -> run the primitive
         (push; or pick -> place pose from the object the cup holds -> place) -> settle -> the task's
-        rules (`shelf_env.task`) -> camera."""
+        rules (`shelf_env.world.task`) -> camera."""
         before = self._semantic
         if self._obs is None or before is None:
             raise RuntimeError("call reset() before step()")
@@ -491,7 +498,7 @@ class ShelfSortEnv(gym.Env):
     def _carry_shift(self, x: float, y: float) -> float | None:
         """The closed loop's lane check (`DragWatch.lane`) for a pick at (x, y): the sideways shift in
         metres of the nearest carry that clears the neighbours seen in the last observation
-        (`shelf_env.clearance.carry_path`), 0.0 for straight out, None when none is clear."""
+        (`shelf_env.conditions.safe_picks.carry_path`), 0.0 for straight out, None when none is clear."""
         assert self.drag_watch is not None
         labels, height = self._observed_semantic()
         row, col = self.codec.cell_of(x, y)
@@ -513,7 +520,7 @@ class ShelfSortEnv(gym.Env):
         When no object is visible at all, every action is allowed (the mask has nothing to say).
 
         With ``safe_picks=True`` a pick is allowed only where its object can be carried out of the
-        opening clear of every other visible object (`shelf_env.clearance.carry_clear`; with the
+        opening clear of every other visible object (`shelf_env.conditions.safe_picks.carry_clear`; with the
         closed loop's lane check, also by a sideways detour of up to `detour_reach`), unless no
         pick is: then every pick on an object stays allowed (a pick-only policy must act).
         """

@@ -32,7 +32,7 @@ REWARD_STEP = -1.0
 
 # Target regions (ours; the paper says only "randomly located"): every region is a rectangle
 # REGION_WIDTH wide (along y) whose depth is drawn so that its class's objects cover at most
-# REGION_MAX_FILL of it; see `shelf_env.world.sample_regions`.
+# REGION_MAX_FILL of it; see `shelf_env.world.cabinet.sample_regions`.
 REGION_WIDTH = 0.18
 REGION_MIN_DEPTH = 0.16
 REGION_MAX_FILL = 0.5

@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 
 from shelf_env.actions import MIRROR_MAP, ActionCodec
-from shelf_env.camera import CLASS_RGB, REGION_RGB
+from shelf_env.camera.heightmap import CLASS_RGB, REGION_RGB
 
 
 class MirrorWidth:

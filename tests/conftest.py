@@ -3,8 +3,8 @@ import pytest
 import torch as th
 
 import shelf_env  # noqa: F401
-from shelf_env.objects import ObjectSpec
-from shelf_env.world import Region
+from shelf_env.world.cabinet import Region
+from shelf_env.world.objects import ObjectSpec
 
 # The test networks are tiny; one thread is as fast, and several OpenMP threads spin badly when
 # another process (a training run, a parallel job) shares the two cores.

@@ -107,7 +107,7 @@ class CoinEnv(FindTheSquareEnv):
 class SquareSupervisor(gym.Wrapper):
     """Intervenes (sb3_pixeldqn's ``info["correction"]``) on every action off the square of the
     paying map: executes the square's centre on that map instead and reports the vetoed action as
-    ending the episode with reward -10 and an all-zero next observation, as `shelf_env.lookahead.
+    ending the episode with reward -10 and an all-zero next observation, as `shelf_env.privileged.lookahead.
     FallGuard` reports a vetoed pick. ``report`` replaces the report (to test bad ones)."""
 
     def __init__(self, env: FindTheSquareEnv, report=None) -> None:

@@ -1,13 +1,9 @@
-"""examples/ablation.py: rows on disk are skipped, the report tabulates them and draws the curves."""
+"""research/ablation.py: rows on disk are skipped, the report tabulates them and draws the curves."""
 
 import json
-import pathlib
-import sys
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "examples"))
-import ablation  # noqa: E402
-
-from shelf_env import evaluation as ev  # noqa: E402
+from research import ablation
+from shelf_env.evaluation import protocol as ev
 
 
 def row(name: str, seed: int, sr_train: float) -> dict:
@@ -24,7 +20,7 @@ def test_rows_on_disk_are_skipped_and_reported(tmp_path, monkeypatch, capsys):
     rows.mkdir()
     (rows / "recipe_s0.json").write_text(json.dumps(row("recipe", 0, 96.0)))
     (rows / "no-demos_s0.json").write_text(json.dumps(row("no-demos", 0, 40.0)))
-    # H-d's cells on disk (as examples/check_recipe.py writes them): 10/10 in 2.2 actions, 9/10 on YCB
+    # H-d's cells on disk (as research/check_recipe.py writes them): 10/10 in 2.2 actions, 9/10 on YCB
     for object_set, actions, successes in (("train", [2] * 8 + [3] * 2, 10), ("ycb", [2] * 10, 9)):
         ev.save_cell(ev.cell_path(tmp_path, "h-d", object_set, 3, ablation.HELDOUT_SEED, 10),
                      [ev.EpisodeRecord("h-d", object_set, 3, ablation.HELDOUT_SEED, run, run < successes, a, 3, False)

@@ -3,7 +3,7 @@
 import numpy as np
 
 from shelf_env import params
-from shelf_env.camera import CLASS_RGB, FREE, OCCLUDED, OCCLUDED_RGB, REGION_RGB
+from shelf_env.camera.heightmap import CLASS_RGB, FREE, OCCLUDED, OCCLUDED_RGB, REGION_RGB
 from tests.conftest import REGIONS, box
 
 

@@ -1,4 +1,4 @@
-"""Safe picks (`shelf_env.clearance`, ``ShelfSortEnv(safe_picks=True)``): a pick whose object would be
+"""Safe picks (`shelf_env.conditions.safe_picks`, ``ShelfSortEnv(safe_picks=True)``): a pick whose object would be
 carried out of the opening through a taller neighbour is left out of the mask and of the
 heuristics' choices, and the carry that the mask allows leaves the neighbour in the cabinet."""
 
@@ -8,10 +8,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from shelf_env.clearance import Z_CARRY, carry_clear, carry_path
-from shelf_env.evaluation import check_conditions
-from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic
-from shelf_env.world import Region
+from shelf_env.baselines.heuristics import AccessibilityHeuristic, DistanceHeuristic
+from shelf_env.conditions.safe_picks import Z_CARRY, carry_clear, carry_path
+from shelf_env.evaluation.protocol import check_conditions
+from shelf_env.world.cabinet import Region
 from tests.conftest import REGIONS
 from tests.test_closed_loop import CLEAN_SCENE, DRAG_SCENE
 

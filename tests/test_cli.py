@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from shelf_env import demo
-from shelf_env.cli import evaluate, train
-from shelf_env.training import PRESETS
+from shelf_env.cli import demo, evaluate, train
+from shelf_env.training.config import PRESETS
 
 SCRIPTS = {"shelf-demo": demo.main, "shelf-train": train.main, "shelf-evaluate": evaluate.main}
 
@@ -62,7 +61,7 @@ def test_demo_overlays_the_model_q_maps_under_the_loop_breaker():
     import gymnasium as gym
 
     from sb3_pixeldqn import LoopBreaker
-    from shelf_env import evaluation as ev
+    from shelf_env.evaluation import protocol as ev
 
     name = "examples/pretrained/p_s.zip"
     env = gym.make("ShelfSort-v0", num_objects=2, pixel_size=ev.policy_pixel_size(name))

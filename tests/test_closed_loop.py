@@ -1,4 +1,4 @@
-"""Closed-loop primitives (`ShelfSortEnv(closed_loop=True)`, `shelf_env.robot.DragWatch`): the retract
+"""Closed-loop primitives (`ShelfSortEnv(closed_loop=True)`, `shelf_env.conditions.closed_loop.DragWatch`): the retract
 after a pick that drags a neighbour out of the cabinet open loop is caught by the cup's force
 sensor and the object is put down; a clean pick is left alone."""
 
@@ -7,8 +7,8 @@ from __future__ import annotations
 import gymnasium as gym
 import pytest
 
-from shelf_env.objects import ObjectSpec
-from shelf_env.robot import DragWatch
+from shelf_env.conditions.closed_loop import DragWatch
+from shelf_env.world.objects import ObjectSpec
 from tests.conftest import REGIONS
 
 

@@ -1,14 +1,11 @@
-"""scripts/closed_loop_table.py: issue 13's table counts sorted episodes and falls per folder and
+"""research/closed_loop_table.py: issue 13's table counts sorted episodes and falls per folder and
 compares each folder with the first (the open loop)."""
 
 import json
 import pathlib
-import sys
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "scripts"))
-import closed_loop_table  # noqa: E402
-
-from shelf_env import evaluation as ev  # noqa: E402
+from research import closed_loop_table
+from shelf_env.evaluation import protocol as ev
 
 
 def write_folder(out: pathlib.Path, outcomes: dict[int, list[tuple[bool, bool]]], conditions=None) -> pathlib.Path:

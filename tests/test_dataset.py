@@ -9,7 +9,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from shelf_env import dataset
+from shelf_env.privileged import dataset
 
 MODEL = "examples/pretrained/p_s.zip"
 

@@ -5,7 +5,6 @@ import hashlib
 import json
 import math
 import os
-import pathlib
 
 import gymnasium as gym
 import numpy as np
@@ -13,9 +12,9 @@ import pytest
 from pixel_envs import FindTheSquareEnv
 
 from sb3_pixeldqn import PixelDoubleDQN
-from shelf_env import evaluation as ev
 from shelf_env.cli import evaluate as evaluate_cli
-from shelf_env.evaluation import EpisodeRecord
+from shelf_env.evaluation import protocol as ev
+from shelf_env.evaluation.protocol import EpisodeRecord
 
 
 def rec(seed, run, success, actions, unsorted=3, n=3, policy="h-d"):
@@ -250,7 +249,7 @@ def test_evaluation_under_conditions_and_one_condition_set_per_folder(tmp_path, 
 
 
 def test_closed_loop_conditions_record_every_field_of_the_watch(tmp_path, capsys):
-    from shelf_env.robot import DragWatch
+    from shelf_env.conditions.closed_loop import DragWatch
 
     grid = ["--policies", "h-d", "--ns", "1", "--runs", "1", "--seeds", "1", "--object-sets", "train",
             "--workers", "1"]
@@ -275,10 +274,7 @@ def test_closed_loop_conditions_record_every_field_of_the_watch(tmp_path, capsys
 
 
 def test_plot_conditions_draws_curves_from_two_evaluations(tmp_path, capsys):
-    import sys
-
-    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "examples"))
-    import plot_conditions
+    from research import plot_conditions
 
     for level, ok in (("0", (True, True)), ("0.2", (True, False))):
         records = [ev.EpisodeRecord(p, "ycb", n, 0, run, s, 4, 2, not s) for p in ("h-a", "h-d") for n in (5, 8)

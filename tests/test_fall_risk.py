@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
+from research import fall_risk as fr
 from sb3_pixeldqn import PixelDoubleDQN
 from sb3_pixeldqn.loop_breaker import LoopBreaker
-from shelf_env import evaluation as ev
-from shelf_env import fall_risk as fr
+from shelf_env import policies
+from shelf_env.evaluation import protocol as ev
 
 
 def test_each_label_is_what_stepping_that_pick_does():
@@ -165,35 +166,43 @@ def test_the_filter_masks_exactly_the_risky_picks():
 
 def test_the_evaluation_plays_a_checkpoint_under_its_fall_filter(tmp_path):
     """``PATH+fall-filter`` (and ``+loop-breaker`` after it): its own label, the model beside the
-    checkpoint, refused without one or for a named policy, cells fingerprinted with the model too."""
+    checkpoint, refused without one or for a named policy, cells fingerprinted with the model too. The
+    wrapper comes from the registry, where research.fall_risk registers it on import."""
+    assert policies.WRAPPERS[fr.FALL_FILTER].files is not None
     env = gym.make("ShelfSort-v0")
     model = PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0), ("push", 0), ("push", 180)],
                                                                   widths=(4, 8, 8)), seed=0)
     model.save(tmp_path / "p.zip")
     env.close()
     zip_path = str(tmp_path / "p.zip")
-    policy = zip_path + ev.FALL_FILTER + ev.LOOP_BREAKER
-    assert ev.policy_wrappers(policy) == (zip_path, (ev.FALL_FILTER, ev.LOOP_BREAKER))
+    policy = zip_path + fr.FALL_FILTER + ev.LOOP_BREAKER
+    assert ev.policy_wrappers(policy) == (zip_path, (fr.FALL_FILTER, ev.LOOP_BREAKER))
     assert ev.policy_wrappers(zip_path + ev.LOOP_BREAKER) == (zip_path, (ev.LOOP_BREAKER,))
     assert ev.policy_label(policy) == "p+fall-filter+loop-breaker" and ev.policy_file(policy) == zip_path
     with pytest.raises(ValueError, match="no fall-risk model at .*p.fall_risk.pt"):
         ev.check_policy(policy)
     with pytest.raises(ValueError, match="not a checkpoint"):
-        ev.check_policy("h-d" + ev.FALL_FILTER)
-    fr.FallRiskModel(4, (4, 8, 8), threshold=0.5).save(ev.fall_filter_path(zip_path))
+        ev.check_policy("h-d" + fr.FALL_FILTER)
+    fr.FallRiskModel(4, (4, 8, 8), threshold=0.5).save(fr.fall_filter_path(zip_path))
     assert ev.check_policy(policy) == ("pick", "push")
     env = ev.make_env(policy, 2, "train")
     try:
         agent = ev.make_policy(policy, env)
         assert isinstance(agent, LoopBreaker) and isinstance(agent.policy, fr.FallFilter)
-        record = ev.run_episode(env, ev.make_policy(zip_path + ev.FALL_FILTER, env), ev.scene_seed(0, 2, 0))
+        record = ev.run_episode(env, ev.make_policy(zip_path + fr.FALL_FILTER, env), ev.scene_seed(0, 2, 0))
         assert set(record["policy_stats"]) == {"masked", "unfiltered"}
     finally:
         env.close()
     ev.check_cell_owner(tmp_path / "out", [policy], record=True)
-    fr.FallRiskModel(4, (4, 8, 8), threshold=0.9).save(ev.fall_filter_path(zip_path))  # another filter
+    fr.FallRiskModel(4, (4, 8, 8), threshold=0.9).save(fr.fall_filter_path(zip_path))  # another filter
     with pytest.raises(ValueError, match="holds cells of another"):
         ev.check_cell_owner(tmp_path / "out", [policy])
+
+
+def test_a_spawned_evaluation_worker_knows_the_experiment_s_wrapper() -> None:
+    """shelf-evaluate's workers import the modules that registered wrappers (research.fall_risk)."""
+    assert "research.fall_risk" in policies.registering_modules()
+    policies.import_modules(policies.registering_modules())
 
 
 class OracleRisk:

@@ -7,8 +7,8 @@ from pixel_envs import FindTheSquareEnv
 
 import shelf_env  # noqa: F401
 from shelf_env.actions import ActionCodec
-from shelf_env.camera import CLASS_RGB, FREE_RGB, REGION_RGB
-from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy, label_blobs
+from shelf_env.baselines.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy, label_blobs
+from shelf_env.camera.heightmap import CLASS_RGB, FREE_RGB, REGION_RGB
 
 H, W = 80, 120
 CODEC = ActionCodec.for_primitives(("pick", "push"), 0.005)

@@ -6,8 +6,8 @@ import gymnasium as gym
 import pytest
 
 from shelf_env import params
-from shelf_env.lookahead import probe_step
-from shelf_env.training import TrainConfig
+from shelf_env.privileged.lookahead import probe_step
+from shelf_env.training.config import TrainConfig
 from tests.conftest import REGIONS, action_at, box
 
 # the fall of tests/test_primitives.py: the tall object's pick drags the light one out of the opening
@@ -66,8 +66,8 @@ def test_bad_invalid_reward_is_refused_by_name(bad):
 
 
 def test_train_config_passes_invalid_reward_to_the_training_env_only_and_to_the_zoo_file():
-    from shelf_env.training import PRESETS, make_env, make_unsupervised_training_env
-    from shelf_env.zoo import ENV_ID, zoo_hyperparams
+    from shelf_env.training.config import PRESETS, make_env, make_unsupervised_training_env
+    from shelf_env.training.zoo import ENV_ID, zoo_hyperparams
 
     config = TrainConfig(invalid_reward=-100.0, start_objects=1)
     training, check = make_unsupervised_training_env(config), make_env(config)

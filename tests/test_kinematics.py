@@ -4,9 +4,9 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from shelf_env import kinematics
-from shelf_env.robot import DH_BASE_IN_URDF, EE_IN_FLANGE, Robot
-from shelf_env.world import World
+from shelf_env.robot import kinematics
+from shelf_env.robot.arm import DH_BASE_IN_URDF, EE_IN_FLANGE, Robot
+from shelf_env.world.cabinet import World
 
 
 def test_inverse_reproduces_forward_on_all_branches():

@@ -1,4 +1,4 @@
-"""The privileged one-step lookahead (`shelf_env.lookahead`): a forked probe reports exactly what the
+"""The privileged one-step lookahead (`shelf_env.privileged.lookahead`): a forked probe reports exactly what the
 env's step will do and leaves the env untouched; the lookahead heuristic vetoes the crafted drag."""
 
 from __future__ import annotations
@@ -9,20 +9,21 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from shelf_env import evaluation as ev
-from shelf_env import lookahead, params
-from shelf_env.heuristics import AccessibilityHeuristic, DistanceHeuristic, ObservationView
-from shelf_env.lookahead import (
+from research.lookahead_falls import invalid_step_table
+from shelf_env import params
+from shelf_env.baselines.heuristics import AccessibilityHeuristic, DistanceHeuristic, ObservationView
+from shelf_env.evaluation import protocol as ev
+from shelf_env.privileged import lookahead
+from shelf_env.privileged.lookahead import (
     STAT_KEYS,
     FallGuard,
     LookaheadAccessibility,
     LookaheadDistance,
     LookaheadHeuristic,
     Outcome,
-    invalid_step_table,
     probe_step,
 )
-from shelf_env.world import Region
+from shelf_env.world.cabinet import Region
 from tests.conftest import REGIONS
 from tests.test_closed_loop import DRAG_SCENE
 

@@ -8,7 +8,7 @@ from gymnasium import spaces
 
 from sb3_pixeldqn import PixelDoubleDQN
 from sb3_pixeldqn.loop_breaker import LoopBreaker
-from shelf_env import evaluation as ev
+from shelf_env.evaluation import protocol as ev
 
 MAPS, H, W = 2, 4, 5
 
@@ -150,7 +150,7 @@ def test_the_evaluation_plays_a_checkpoint_under_a_loop_breaker(tmp_path):
 def test_heuristics_choose_among_the_allowed_cells_and_run_under_a_breaker():
     """H-d / H-a take masks (a LoopBreaker's) without being given the env's by an evaluation: a
     masked-out choice moves to another candidate cell; masks that leave no candidate change nothing."""
-    from shelf_env.heuristics import DistanceHeuristic
+    from shelf_env.baselines.heuristics import DistanceHeuristic
 
     env = gym.make("ShelfSort-v0", num_objects=4)
     try:

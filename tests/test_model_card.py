@@ -1,11 +1,11 @@
-"""`shelf_env.model_card`: a card from a run's progress and episodes and an evaluation's results."""
+"""`shelf_env.training.model_card`: a card from a run's progress and episodes and an evaluation's results."""
 
 import csv
 import json
 
-from shelf_env import evaluation as ev
-from shelf_env.model_card import main, model_card
-from shelf_env.training import PRESETS
+from shelf_env.evaluation import protocol as ev
+from shelf_env.training.config import PRESETS
+from shelf_env.training.model_card import main, model_card
 
 
 def fake_run(tmp_path):

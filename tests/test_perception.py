@@ -1,4 +1,4 @@
-"""Perception noise (`shelf_env.perception`): each kind does what it says, noise is reproducible per
+"""Perception noise (`shelf_env.conditions.perception_noise`): each kind does what it says, noise is reproducible per
 seed, zero noise is bit-identical to none, bad settings are a clear ValueError."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from shelf_env.camera import CLASS_RGB
-from shelf_env.perception import PerceptionNoise
+from shelf_env.camera.heightmap import CLASS_RGB
+from shelf_env.conditions.perception_noise import PerceptionNoise
 from tests.conftest import REGIONS, box
 
 SCENE = [(box(), 0, 0.30, -0.20, 0.0), (box(), 1, 0.25, 0.0, 0.0), (box(), 2, 0.15, 0.20, 0.0)]

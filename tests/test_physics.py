@@ -1,4 +1,4 @@
-"""The cheaper action (`shelf_env.world.Physics`): "fast" physics skips only what cannot matter.
+"""The cheaper action (`shelf_env.world.cabinet.Physics`): "fast" physics skips only what cannot matter.
 
 Free motion (`Robot.move_linear` with ``skip_free_motion``) puts the arm on its path where nothing
 is near instead of driving it there; these tests check that it skips the free parts, simulates
@@ -13,7 +13,7 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from shelf_env.world import PHYSICS, Physics
+from shelf_env.world.cabinet import PHYSICS, Physics
 from tests.conftest import REGIONS, box
 
 

@@ -1,4 +1,4 @@
-"""The place heuristic (`shelf_env.placement.place_position`): the back of the region first, and with
+"""The place heuristic (`shelf_env.robot.placement.place_position`): the back of the region first, and with
 ``min_front`` (the closed loop's place check) never a footprint nearer the opening than that."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from shelf_env import params
-from shelf_env.camera import FREE
-from shelf_env.placement import place_position
+from shelf_env.camera.heightmap import FREE
+from shelf_env.robot.placement import place_position
 
 ROWS, COLS = 80, 120  # 0.40 m x 0.60 m at 5 mm
 FOOTPRINT = (0.06, 0.06)

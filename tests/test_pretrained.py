@@ -9,8 +9,8 @@ import pytest
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import PixelDoubleDQN
-from shelf_env import evaluation as ev
-from shelf_env.ship import MAX_MB, MODELS
+from shelf_env.evaluation import protocol as ev
+from shelf_env.training.ship import MAX_MB, MODELS
 
 PRETRAINED = pathlib.Path(__file__).resolve().parents[1] / "examples" / "pretrained"
 SHIPPED = sorted(PRETRAINED.glob("*.zip"))

@@ -68,7 +68,7 @@ def test_truncation_after_max_actions():
 
 
 def test_hindsight_relabelled_transition_when_all_in_wrong_regions(env):
-    from shelf_env.camera import CLASS_RGB
+    from shelf_env.camera.heightmap import CLASS_RGB
     # green object in yellow's region and yellow object in green's: every object is in some
     # region but none in its own; a push in empty space keeps it that way
     env.set_scene([(box(), 0, 0.30, 0.0, 0.0), (box(), 1, 0.30, 0.21, 0.0)], REGIONS)

@@ -6,7 +6,7 @@ import gymnasium as gym
 import pytest
 
 from shelf_env import params
-from shelf_env.training import TrainConfig
+from shelf_env.training.config import TrainConfig
 from tests.conftest import REGIONS, action_at, box
 
 
@@ -71,8 +71,8 @@ def test_bad_progress_reward_is_refused_by_name(bad):
 
 
 def test_train_config_passes_progress_reward_to_the_training_env_only_and_to_the_zoo_file():
-    from shelf_env.training import PRESETS, make_env, make_unsupervised_training_env
-    from shelf_env.zoo import ENV_ID, zoo_hyperparams
+    from shelf_env.training.config import PRESETS, make_env, make_unsupervised_training_env
+    from shelf_env.training.zoo import ENV_ID, zoo_hyperparams
 
     config = TrainConfig(progress_reward=0.5, start_objects=1)
     training, check = make_unsupervised_training_env(config), make_env(config)

@@ -1,4 +1,4 @@
-"""Issue 10's verdict (shelf_env.report) on hand-made results: margins, misses and bad input."""
+"""Issue 10's verdict (shelf_env.evaluation.report) on hand-made results: margins, misses and bad input."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import csv
 
 import pytest
 
-from shelf_env import report as rp
-from shelf_env.evaluation import FAILURES
+from shelf_env.evaluation import report as rp
+from shelf_env.evaluation.protocol import FAILURES
 
 FIELDS = ["policy", "object_set", "num_objects", "seeds", "runs", "sr_mean", "sr_std", "ae_mean", "ae_std",
           "mae_mean", "mae_std", "fell_rate", *(f"{k}_rate" for k in FAILURES[1:]), "noop_share"]

@@ -1,4 +1,4 @@
-"""The fine-tune and evaluation scripts refuse bad arguments before they set up, train or write."""
+"""The experiments' fine-tune and evaluation scripts refuse bad arguments before they set up, train or write."""
 
 from __future__ import annotations
 
@@ -9,8 +9,14 @@ import subprocess
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
+#: where each experiment's script lives: beside its results
+SCRIPTS = {"evaluate_closed_safe.sh": "results/loop_breaker/evaluate_closed_safe.sh",
+           "finetune_mixed.sh": "results/loop_breaker/finetune_mixed.sh",
+           "privileged_ceiling.sh": "results/privileged_ceiling/run.sh"}
+
+
 def _bash(script: str, *args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run(["bash", str(ROOT / "scripts" / script), *args], capture_output=True, text=True,
+    return subprocess.run(["bash", str(ROOT / SCRIPTS[script]), *args], capture_output=True, text=True,
                           timeout=60, env={**os.environ, **(env or {})})
 
 
@@ -18,7 +24,7 @@ def test_evaluate_closed_safe_names_a_missing_checkpoint(tmp_path: pathlib.Path)
     out = tmp_path / "out"
     done = _bash("evaluate_closed_safe.sh", str(tmp_path / "missing.zip"), str(out))
     assert done.returncode == 2
-    assert "usage: bash scripts/evaluate_closed_safe.sh ZIP OUT" in done.stderr
+    assert "usage: bash results/loop_breaker/evaluate_closed_safe.sh ZIP OUT" in done.stderr
     assert "missing.zip" in done.stderr
     assert not out.exists()
     assert _bash("evaluate_closed_safe.sh").returncode == 2
@@ -48,6 +54,6 @@ def test_privileged_ceiling_refuses_an_unknown_mode_before_it_writes() -> None:
     before = sorted(p.name for p in (ROOT / "results").iterdir())
     done = _bash("privileged_ceiling.sh", "closed")
     assert done.returncode == 2
-    assert "usage: bash scripts/privileged_ceiling.sh [closed_safe|open]" in done.stderr
+    assert "usage: bash results/privileged_ceiling/run.sh [closed_safe|open]" in done.stderr
     assert "(got mode: closed)" in done.stderr
     assert sorted(p.name for p in (ROOT / "results").iterdir()) == before

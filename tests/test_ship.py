@@ -1,4 +1,4 @@
-"""shelf_env.ship: only finished runs ship, as loadable zips of their layout, with the model card."""
+"""shelf_env.training.ship: only finished runs ship, as loadable zips of their layout, with the model card."""
 
 import json
 import shutil
@@ -7,7 +7,7 @@ import pytest
 
 from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env.cli import train
-from shelf_env.ship import main, ship
+from shelf_env.training.ship import main, ship
 
 
 @pytest.fixture(scope="module")

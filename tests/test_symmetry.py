@@ -13,7 +13,7 @@ from conftest import REGIONS, action_at, box
 
 from shelf_env.actions import ActionCodec
 from shelf_env.symmetry import MirrorWidth, PermuteClasses, cabinet_symmetries
-from shelf_env.world import Region
+from shelf_env.world.cabinet import Region
 
 
 def mirrored_regions(regions):

@@ -1,9 +1,10 @@
-"""`shelf_env.task`: the task's rules on crafted worlds (sorted, relabel, fell), without a step."""
+"""`shelf_env.world.task`: the task's rules on crafted worlds (sorted, relabel, fell), without a step."""
 
 import pybullet as pb
 import pytest
 
-from shelf_env import params, task
+from shelf_env import params
+from shelf_env.world import task
 from tests.conftest import REGIONS, box
 
 # REGIONS: class 0 left (y > 0.12), class 1 middle, class 2 right (y < -0.12); all full depth

@@ -1,4 +1,4 @@
-"""Fall traces (shelf_env.traces): the phase and the object a fall comes from, on a crafted drag and
+"""Fall traces (shelf_env.evaluation.traces): the phase and the object a fall comes from, on a crafted drag and
 on a replayed evaluation episode that must reproduce its record."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import gymnasium as gym
 import pybullet as pb
 import pytest
 
-from shelf_env import evaluation as ev
-from shelf_env import traces
+from shelf_env.evaluation import protocol as ev
+from shelf_env.evaluation import traces
 from tests.conftest import REGIONS
 from tests.test_closed_loop import CLEAN_SCENE, DRAG_SCENE
 
@@ -81,8 +81,8 @@ def test_replayed_fall_reproduces_its_record_and_is_tabled(tmp_path, capsys):
     assert step["primitive"] == "pick" and len(step["fell"]) >= 1
     assert all(f["phase"] in traces.PHASES for f in step["fell"])
     table = (tmp_path / "falls.md").read_text()
-    assert table.startswith(f"Objects that left the cabinet, by phase (`python -m shelf_env.traces {tmp_path} "
-                            "--policies h-d --ns 3`):")
+    assert table.startswith("Objects that left the cabinet, by phase (`python -m shelf_env.evaluation.traces "
+                            f"{tmp_path} --policies h-d --ns 3`):")
     assert "| policy | N | episodes replayed |" in table and "| h-d | 3 | 1 |" in table
     assert sum(traces.fall_counts([trace]).values()) == len(step["fell"])
 
@@ -115,7 +115,7 @@ def test_a_fall_during_the_lane_checks_sideways_carry_is_traced_to_the_detour():
     # the lane check carries the box sideways past the front one; a detour that knocked the front
     # one out (moved out by hand, as in the test above) is named
     def knock_after_detour(runner, knock_out):
-        watched_move = runner._watched_move
+        watched_move = runner._carry_move
 
         def knocking_detour(start, end, speed, phase):
             caught = watched_move(start, end, speed, phase)
@@ -123,7 +123,7 @@ def test_a_fall_during_the_lane_checks_sideways_carry_is_traced_to_the_detour():
                 knock_out()
             return caught
 
-        runner._watched_move = knocking_detour
+        runner._carry_move = knocking_detour
 
     info, fell, front = watched_pick(DRAG_SCENE, True, knock_after_detour)
     assert [e["phase"] for e in info["interventions"]] == ["lane"] and info["fell"]

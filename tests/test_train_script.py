@@ -211,7 +211,8 @@ def test_a_supervised_run_replaces_the_vetoed_actions_and_keeps_them(tmp_path, c
     every pick is fine): the ring holds only the executed picks, the demonstration store each
     correction's vetoed push and executed pick; guard cannot be amended on a resumed run."""
     from sb3_pixeldqn import PixelDoubleDQN
-    from shelf_env import lookahead, params
+    from shelf_env import params
+    from shelf_env.privileged import lookahead
 
     real_probe = lookahead.probe_step
 

@@ -1,15 +1,15 @@
-"""shelf_env.training: presets, the model they build, demonstrations on the real env, masks in evaluation."""
+"""shelf_env.training.config: presets, the model they build, demonstrations on the real env, masks in evaluation."""
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
 from sb3_pixeldqn import PixelDoubleDQN
-from shelf_env import evaluation as ev
 from shelf_env import params
-from shelf_env.heuristics import DistanceHeuristic
+from shelf_env.baselines.heuristics import DistanceHeuristic
+from shelf_env.evaluation import protocol as ev
 from shelf_env.symmetry import MirrorWidth, PermuteClasses
-from shelf_env.training import PRESETS, TrainConfig, collect_demonstrations, demo_policy, make_env, make_model
+from shelf_env.training.config import PRESETS, TrainConfig, collect_demonstrations, demo_policy, make_env, make_model
 
 
 def test_paper_preset_keeps_the_papers_values():
@@ -52,7 +52,7 @@ def test_parallel_envs_and_the_actor_process_exclude_each_other():
 def test_lookahead_teacher_probes_the_training_env_it_demonstrates_in():
     # demo_policy="h-d-lookahead": H-d that probes each pick in the very env the demonstrations are
     # played in (a privileged teacher); its probes leave that env's episode as it was
-    from shelf_env.lookahead import LookaheadDistance
+    from shelf_env.privileged.lookahead import LookaheadDistance
 
     config = PRESETS["recipe"].replace(buffer_size=50, widths=(4, 8, 8), start_objects=2,
                                        demo_policy="h-d-lookahead")
@@ -71,7 +71,7 @@ def test_lookahead_teacher_probes_the_training_env_it_demonstrates_in():
 def test_lookahead_teacher_counterfactuals_are_kept_as_terminal_non_expert_transitions(monkeypatch):
     # demo_counterfactuals: every pick the teacher rejected (its probe ended the episode invalid) is
     # stored before the step as a terminal transition with the env's reward, without the margin flag
-    from shelf_env import lookahead
+    from shelf_env.privileged import lookahead
 
     config = PRESETS["recipe"].replace(buffer_size=50, widths=(4, 8, 8), start_objects=2, demo_steps=6,
                                        demo_objects=(2,), demo_policy="h-d-lookahead", demo_counterfactuals=True)
@@ -103,8 +103,8 @@ def test_lookahead_teacher_counterfactuals_are_kept_as_terminal_non_expert_trans
 
 
 def test_the_guard_supervises_the_training_env_only():
-    from shelf_env.lookahead import FallGuard, LookaheadAccessibility
-    from shelf_env.training import make_actor_env, make_training_env
+    from shelf_env.privileged.lookahead import FallGuard, LookaheadAccessibility
+    from shelf_env.training.config import make_actor_env, make_training_env
 
     config = PRESETS["recipe"].replace(start_objects=2, guard="h-a-lookahead")
     env = make_training_env(config)
@@ -193,7 +193,7 @@ def test_evaluation_gives_masks_to_masked_policies_only(tmp_path):
 
 
 def test_committed_recipe_checkpoint_sorts_held_out_scenes():
-    """results/learning/recipe_n3.zip (docs/learning.md) loads on a fresh env at its cell size and,
+    """results/learning/recipe_n3.zip (docs/experiments/learning-recipe.md) loads on a fresh env at its cell size and,
     greedy with the env's masks, sorts the first held-out scenes at N = 3 within 3 N actions, none of them a no-op."""
     path = "results/learning/recipe_n3.zip"
     env = gym.make("ShelfSort-v0", num_objects=3, pixel_size=ev.checkpoint_pixel_size(path))
@@ -204,7 +204,7 @@ def test_committed_recipe_checkpoint_sorts_held_out_scenes():
 
 
 def test_eval_action_limit_grows_with_objects_only_when_asked():
-    from shelf_env.training import eval_action_limit
+    from shelf_env.training.config import eval_action_limit
 
     assert eval_action_limit(PRESETS["recipe"]) == 20
     limit = eval_action_limit(PRESETS["recipe"].replace(eval_actions_per_object=3.0))
@@ -213,7 +213,7 @@ def test_eval_action_limit_grows_with_objects_only_when_asked():
 
 def test_callbacks_include_q_map_images_only_when_asked():
     from sb3_pixeldqn import CurriculumCallback, QMapImageCallback
-    from shelf_env.training import make_callbacks
+    from shelf_env.training.config import make_callbacks
 
     assert [type(c) for c in make_callbacks(PRESETS["recipe"], verbose=0)] == [CurriculumCallback]
     with_images = make_callbacks(PRESETS["recipe"].replace(tb_images_every=500), verbose=0)
@@ -223,7 +223,7 @@ def test_callbacks_include_q_map_images_only_when_asked():
 
 
 def test_safe_picks_reaches_the_training_and_check_envs_and_the_zoo_file():
-    from shelf_env.zoo import ENV_ID, zoo_hyperparams
+    from shelf_env.training.zoo import ENV_ID, zoo_hyperparams
 
     config = PRESETS["p_s"].replace(safe_picks=True)
     env = make_env(config)
@@ -237,7 +237,7 @@ def test_safe_picks_reaches_the_training_and_check_envs_and_the_zoo_file():
 
 
 def test_closed_loop_reaches_the_training_and_check_envs_and_the_zoo_file():
-    from shelf_env.zoo import ENV_ID, zoo_hyperparams
+    from shelf_env.training.zoo import ENV_ID, zoo_hyperparams
 
     open_env, default_env = make_env(PRESETS["p_s"]), make_env(PRESETS["p_s"].replace(closed_loop=True))
     assert open_env.unwrapped.drag_watch is None  # open loop by default, as in the paper
@@ -257,8 +257,8 @@ def test_closed_loop_reaches_the_training_and_check_envs_and_the_zoo_file():
 
 
 def test_min_num_objects_mixes_the_training_env_only_and_reaches_the_zoo_file():
-    from shelf_env.training import make_curriculum, make_training_env
-    from shelf_env.zoo import ENV_ID, zoo_hyperparams
+    from shelf_env.training.config import make_curriculum, make_training_env
+    from shelf_env.training.zoo import ENV_ID, zoo_hyperparams
 
     config = PRESETS["p_s"].replace(min_num_objects=3, start_objects=6, pixel_size=0.02)
     training = make_training_env(config)

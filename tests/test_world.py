@@ -6,8 +6,8 @@ import pytest
 
 from shelf_env import params
 from shelf_env.env import ShelfSortEnv
-from shelf_env.objects import YCB_KINDS, sample_specs
-from shelf_env.world import Region, World, obb_corners, obbs_overlap, sample_regions
+from shelf_env.world.cabinet import Region, World, obb_corners, obbs_overlap, sample_regions
+from shelf_env.world.objects import YCB_KINDS, sample_specs
 
 
 @pytest.mark.parametrize("object_set", ["train", "ycb"])

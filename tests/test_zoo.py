@@ -14,8 +14,8 @@ import yaml
 pytest.importorskip("rl_zoo3", reason="the zoo extra: pip install '.[zoo]'")
 
 from sb3_pixeldqn import PixelDoubleDQN  # noqa: E402
-from shelf_env.training import PRESETS, make_env  # noqa: E402
-from shelf_env.zoo import HYPERPARAMS, RecipeCallback, write_hyperparams, zoo_hyperparams  # noqa: E402
+from shelf_env.training.config import PRESETS, make_env  # noqa: E402
+from shelf_env.training.zoo import HYPERPARAMS, RecipeCallback, write_hyperparams, zoo_hyperparams  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -27,7 +27,7 @@ def test_committed_yml_is_generated_from_the_recipe_preset(tmp_path):
     assert entry["learning_rate"] == recipe.learning_rate and entry["target_update_interval"] == 100
     assert entry["env_kwargs"]["pixel_size"] == recipe.pixel_size
     (callback,) = entry["callback"]
-    fields = callback["shelf_env.zoo.RecipeCallback"]
+    fields = callback["shelf_env.training.zoo.RecipeCallback"]
     assert fields["augment"] == ["mirror", "permute"] and fields["demo_policy"] == "h-a" and fields["gate"] == "greedy"
     # every TrainConfig field is in the file exactly once (but `extra`), so the preset is the one place
     flat = set(entry) | set(entry["env_kwargs"]) | set(fields) | {"widths", "relabel", "noop", "noop_penalty"}
@@ -111,12 +111,12 @@ def test_recipe_callback_refuses_fields_no_run_could_use():
 
 
 def test_the_hyperparameter_writer_answers_help_without_writing(tmp_path, monkeypatch, capsys):
-    from shelf_env.zoo import main
+    from shelf_env.training.zoo import main
 
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as done:
         main(["--help"])
-    assert done.value.code == 0 and "usage: python -m shelf_env.zoo" in capsys.readouterr().out
+    assert done.value.code == 0 and "usage: python -m shelf_env.training.zoo" in capsys.readouterr().out
     assert list(tmp_path.iterdir()) == []
     assert main([str(tmp_path / "zoo.yml")]) == 0
     assert "invalid_reward: -10.0" in (tmp_path / "zoo.yml").read_text()

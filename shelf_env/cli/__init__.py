@@ -2,5 +2,5 @@
 
 - ``shelf-train`` (`shelf_env.cli.train`): resumable training on a wall-clock budget;
 - ``shelf-evaluate`` (`shelf_env.cli.evaluate`): the §V evaluation protocol, resumable cell by cell;
-- ``shelf-demo`` (`shelf_env.demo`): watch a policy sort one unseen cabinet, as a GIF.
+- ``shelf-demo`` (`shelf_env.cli.demo`): watch a policy sort one unseen cabinet, as a GIF.
 """

@@ -4,7 +4,7 @@
         --object-sets ycb --out results/baselines --workers 2
 
 Policies: ``h-d``, ``h-a``, ``random``, the privileged diagnostics ``h-d-lookahead`` and
-``h-a-lookahead`` (`shelf_env.lookahead`) or a PixelDoubleDQN checkpoint zip (its P+S or S layout
+``h-a-lookahead`` (`shelf_env.privileged.lookahead`) or a PixelDoubleDQN checkpoint zip (its P+S or S layout
 decides the env's primitives). Every (policy, object set, N, seed) cell runs in a worker process
 and is written to ``<out>/cells/`` as soon as it finishes; running the same command again skips
 the cells already on disk, so an interrupted evaluation resumes. A checkpoint's cells are named
@@ -46,7 +46,8 @@ from typing import Any
 from tqdm import tqdm
 
 from sb3_pixeldqn.files import copy_atomically, write_json_atomically
-from shelf_env import evaluation as ev
+from shelf_env import policies
+from shelf_env.evaluation import protocol as ev
 
 #: A cell: (policy, N, seed, object set).
 Job = tuple[str, int, int, str]
@@ -76,10 +77,10 @@ def json_object(text: str) -> dict:
 
 
 def closed_loop_fields(changes: dict) -> dict:
-    """Every field of the closed loop's watch (`shelf_env.robot.DragWatch`) with ``changes`` made:
+    """Every field of the closed loop's watch (`shelf_env.conditions.closed_loop.DragWatch`) with ``changes`` made:
     what a folder's ``conditions.json`` records, so that a later change of the defaults cannot
     resume a folder under another watch."""
-    from shelf_env.robot import DragWatch
+    from shelf_env.conditions.closed_loop import DragWatch
 
     watch = DragWatch.from_any(changes)
     assert watch is not None  # a dict always gives a watch
@@ -95,9 +96,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--ns", type=parse_ns, default=list(range(3, 15)), help="e.g. 3-14 or 3,5,8")
     p.add_argument("--runs", type=int, default=100, help="episodes per (policy, N, seed) (paper: 100)")
     p.add_argument("--seeds", type=int, default=5, help="number of seeds, 0..S-1 (paper: 5)")
-    p.add_argument("--object-sets", nargs="+", choices=["ycb", "train"], default=["ycb"])
-    p.add_argument("--out", type=pathlib.Path, required=True)
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--object-sets", nargs="+", choices=["ycb", "train"], default=["ycb"],
+                   help="unseen YCB objects (the paper's test) and/or the training objects (Fig. 12)")
+    p.add_argument("--out", type=pathlib.Path, required=True,
+                   help="the evaluation folder: cells/, results.csv, results.json, plots; resumed when it has cells")
+    p.add_argument("--workers", type=int, default=2, help="cells evaluated at once (one process or Ray task each)")
     p.add_argument("--summarize-only", action="store_true", help="only aggregate the cells already on disk")
     p.add_argument("--reuse-cells", type=pathlib.Path, default=None, metavar="FOLDER",
                    help="copy this grid's cells from another evaluation folder made under the same conditions "
@@ -105,14 +108,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--perception-noise", type=json_object, default=None, metavar="JSON",
                    help='evaluate under perception noise, e.g. \'{"dropout": 0.1, "class_flip": 0.05}\'')
     p.add_argument("--closed-loop", nargs="?", const={}, type=json_object, default=None, metavar="JSON",
-                   help="evaluate with closed-loop primitives (shelf_env.robot.DragWatch); an optional JSON "
+                   help="evaluate with closed-loop primitives (shelf_env.conditions.closed_loop.DragWatch); "
+                        "an optional JSON "
                         'object changes the watch\'s fields, e.g. \'{"sustain": 2, "threshold": 0.5}\'')
     p.add_argument("--safe-picks", action="store_true",
                    help="evaluate with the env's safe_picks: every policy picks only objects whose carry out "
-                        "of the opening clears the other visible objects (shelf_env.clearance)")
+                        "of the opening clears the other visible objects (shelf_env.conditions.safe_picks)")
     p.add_argument("--physics", default=None, metavar="NAME",
                    help='"reference" to evaluate on the physics of results before 2026-11-23 '
-                        '(default: the env\'s, "fast"; shelf_env.world.PHYSICS)')
+                        '(default: the env\'s, "fast"; shelf_env.world.cabinet.PHYSICS)')
     p.add_argument("--backend", choices=["local", "ray"], default="local",
                    help="local worker processes (default) or Ray tasks (the ray extra)")
     p.add_argument("--ray-address", default=None,
@@ -139,7 +143,9 @@ def run_local(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, worker
               conditions: dict | None = None) -> None:
     """Every cell of ``todo`` in a worker process; each worker writes its cell when done."""
     ctx = mp.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    # a spawned worker imports the modules that registered the policies' wrappers (an experiment's)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=policies.import_modules,
+                             initargs=(policies.registering_modules(),)) as pool:
         futures = [pool.submit(_run_cell, p, n, s, runs, o, str(paths[(p, n, s, o)]), os.getpid(), conditions)
                    for p, n, s, o in todo]
         for future in tqdm(as_completed(futures), total=len(futures), desc="cells", unit="cell"):
@@ -254,10 +260,10 @@ def main(argv: list[str] | None = None) -> int:
                 import ray  # noqa: F401
             except ImportError as err:
                 raise ValueError("--backend ray needs Ray: pip install '.[ray]'") from err
-            filtered = [p for p in args.policies if ev.FALL_FILTER in ev.policy_wrappers(p)[1]]
-            if filtered:  # a Ray task gets the checkpoint's bytes only, not the model beside it
-                raise ValueError(f"--backend ray does not carry fall-risk models; run {filtered} with the local "
-                                 "backend")
+            beside = [p for p in args.policies if len(ev.policy_files(p)) > 1]
+            if beside:  # a Ray task gets the checkpoint's bytes only, not a wrapper's model beside it
+                raise ValueError(f"--backend ray carries only the checkpoint, not the files its wrappers read; "
+                                 f"run {beside} with the local backend")
             check_ray_address(args.ray_address)
         elif args.ray_address is not None:
             raise ValueError("--ray-address needs --backend ray")

@@ -3,7 +3,7 @@
     shelf-train --out runs/curriculum --hours 2 [--preset recipe|p_s|s|paper|issue3] [--set KEY=VALUE ...]
     python examples/train.py ...                  # the same
 
-The configuration is a `shelf_env.training.TrainConfig` preset with overrides; it is stored in
+The configuration is a `shelf_env.training.config.TrainConfig` preset with overrides; it is stored in
 ``progress.json`` and a resumed run keeps it. With demonstrations, they are collected first (their
 wall time counts in the budget) and kept in the replay buffer.
 
@@ -26,7 +26,7 @@ sha256. A resumed run continues from its own checkpoint.
 
 ``--actor`` (``--set actor=true``; amendable) steps the env in an actor process
 (`sb3_pixeldqn.actor.ActorVecEnv`) while the learner trains: the actor takes one torch thread and
-the learner ``--threads`` minus one (docs/learning.md, lever 9). Demonstrations are collected on an
+the learner ``--threads`` minus one (docs/experiments/learning-recipe.md, lever 9). Demonstrations are collected on an
 in-process env before it starts.
 
 ``--mirror DIR`` keeps a copy of everything but the replay buffer (``model.zip``,
@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import hashlib
 import json
 import pathlib
@@ -54,11 +55,12 @@ import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import HindsightRelabelReplayBuffer, PixelDoubleDQN
 from sb3_pixeldqn.callbacks import curriculum_over
 from sb3_pixeldqn.files import copy_atomically, write_json_atomically, write_text_atomically
-from shelf_env.training import (
+from shelf_env.training.config import (
     PRESETS,
     TrainConfig,
     collect_demonstrations,
     demo_policy,
+    field_help,
     guarded,
     init_from_checkpoint,
     make_actor_env,
@@ -92,66 +94,72 @@ def parse_set(text: str) -> tuple[str, Any]:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="shelf-train", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/curriculum"))
+    p.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/curriculum"),
+                   help="the run's folder: checkpoint, progress, episodes.csv, TensorBoard; resumed when it has them")
     p.add_argument("--preset", choices=sorted(PRESETS), default="recipe",
-                   help="starting configuration (shelf_env/training.py); flags below override it")
+                   help="starting configuration (shelf_env/training/config.py); flags below override it")
     p.add_argument("--set", dest="overrides", type=parse_set, action="append", default=[], metavar="KEY=VALUE",
                    help="override any TrainConfig field, e.g. --set masked=false --set augment=[]")
     p.add_argument("--hours", type=float, default=2.0, help="total wall-clock budget over all resumes")
     p.add_argument("--max-steps", type=int, default=10**7, help="total env-step budget over all resumes")
-    p.add_argument("--checkpoint-minutes", type=float, default=10.0)
+    p.add_argument("--checkpoint-minutes", type=float, default=10.0, help="minutes between checkpoints")
     p.add_argument("--mirror", type=pathlib.Path, default=None,
                    help="copy the checkpoint (all but the replay buffer) here; resume from it when --out has none")
-    p.add_argument("--primitives", choices=["pick-push", "pick"], default=None, help="P+S or the S baseline")
-    p.add_argument("--start-objects", type=int, default=None)
-    p.add_argument("--max-objects", type=int, default=None)
-    p.add_argument("--widths", type=int, nargs=3, default=None)
-    p.add_argument("--buffer-size", type=int, default=None)
-    p.add_argument("--learning-starts", type=int, default=None)
-    p.add_argument("--learning-rate", type=float, default=None)
-    p.add_argument("--exploration-timesteps", type=int, default=None)
-    p.add_argument("--min-stage-timesteps", type=int, default=None,
-                   help="curriculum stages last at least this many steps (0: no minimum)")
-    p.add_argument("--max-stage-timesteps", type=int, default=None,
-                   help="promote a curriculum stage not passed after this many steps (0: never)")
     p.add_argument("--amend", dest="amendments", type=parse_set, action="append", default=[], metavar="KEY=VALUE",
                    help=f"change a resumed run's configuration from now on; one of {', '.join(AMENDABLE)}")
-    p.add_argument("--uniform-exploration", action="store_true", help="draw exploratory actions uniformly")
-    p.add_argument("--actor", action="store_true",
-                   help="act in a separate process while the learner trains (same as --set actor=true): the actor "
-                        "takes 1 torch thread, the learner --threads minus 1")
-    p.add_argument("--n-envs", type=int, default=None, metavar="K",
-                   help="collect from K env processes at once (--set n_envs=K; amendable), K gradient steps per "
-                        "collection step: for machines with many cores")
     p.add_argument("--device", default="auto", help="torch device of the learner, as SB3's (auto: cuda if available)")
     p.add_argument("--init-from", type=pathlib.Path, default=None, metavar="ZIP",
                    help="a new run starts from this checkpoint's weights (same layout and network; its buffer "
                         "is not used); a resumed run continues from its own checkpoint")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the model and the training env")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads (actor and learner together)")
+    add_config_flags(p.add_argument_group("training settings (TrainConfig fields; the preset's value unless given)"))
     return p.parse_args(argv)
+
+
+def parse_bool(text: str) -> bool:
+    value = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}.get(text.lower())
+    if value is None:
+        raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
+    return value
+
+
+def parse_json_or_text(text: str) -> Any:
+    """A value as JSON where it parses (numbers, true/false, null, lists, objects), else the text itself."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def add_config_flags(group: Any) -> None:
+    """One flag per `TrainConfig` field (``--learning-rate``, ``--widths 16 32 64``, ``--actor``), its type
+    from the field's default and its help from the field's comment (`field_help`): every setting is
+    declared once, in TrainConfig. A flag not given leaves the preset's value (`config_from_args`)."""
+    helps = field_help()
+    for f in dataclasses.fields(TrainConfig):
+        if f.name == "extra":
+            continue
+        default = PRESETS["recipe"].__dict__[f.name]
+        flag = "--" + f.name.replace("_", "-")
+        kwargs: dict[str, Any] = {"dest": "config_" + f.name, "default": argparse.SUPPRESS, "help": helps[f.name]}
+        if isinstance(default, bool) and f.name != "closed_loop":
+            kwargs.update(type=parse_bool, nargs="?", const=True, metavar="true|false")
+        elif isinstance(default, tuple):
+            element = int if default and isinstance(default[0], int) else str
+            kwargs.update(type=element, nargs="*", metavar=f.name.upper())
+        elif isinstance(default, float):
+            kwargs.update(type=float, metavar="X")
+        elif isinstance(default, int) and "None" not in str(f.type):
+            kwargs.update(type=int, metavar="N")
+        else:  # str, int or None, and the closed loop's true/false/JSON object
+            kwargs.update(type=parse_json_or_text, metavar="VALUE")
+        group.add_argument(flag, **kwargs)
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
     """The preset with the flags' and ``--set``'s overrides applied."""
-    changes: dict[str, Any] = {}
-    if args.primitives is not None:
-        changes["primitives"] = ("pick", "push") if args.primitives == "pick-push" else ("pick",)
-    for flag, key in (("start_objects", "start_objects"), ("max_objects", "max_objects"),
-                      ("buffer_size", "buffer_size"), ("learning_starts", "learning_starts"),
-                      ("learning_rate", "learning_rate"), ("exploration_timesteps", "exploration_timesteps"),
-                      ("min_stage_timesteps", "min_stage_timesteps"),
-                      ("max_stage_timesteps", "max_stage_timesteps")):
-        if getattr(args, flag) is not None:
-            changes[key] = getattr(args, flag)
-    if args.widths is not None:
-        changes["widths"] = tuple(args.widths)
-    if args.uniform_exploration:
-        changes["masked_exploration"] = False
-    if args.actor:
-        changes["actor"] = True
-    if args.n_envs is not None:
-        changes["n_envs"] = args.n_envs
+    changes = {key.removeprefix("config_"): value for key, value in vars(args).items() if key.startswith("config_")}
     changes.update(dict(args.overrides))
     return PRESETS[args.preset].replace(**changes)
 
@@ -277,8 +285,8 @@ def truncate_csv(path: pathlib.Path, rows: int) -> None:
 
 def check_init_from(path: pathlib.Path, config: TrainConfig) -> None:
     """``--init-from``: a readable checkpoint with the run's primitives and cell size (its network
-    is checked when its weights are loaded, `shelf_env.training.init_from_checkpoint`)."""
-    from shelf_env import evaluation as ev
+    is checked when its weights are loaded, `shelf_env.training.config.init_from_checkpoint`)."""
+    from shelf_env.evaluation import protocol as ev
 
     primitives = ev.checkpoint_primitives(path)  # a clear error for a missing or unreadable file
     pixel_size = ev.checkpoint_pixel_size(path)
@@ -308,8 +316,8 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError("--hours and --max-steps must be > 0, --checkpoint-minutes >= 0, --threads >= 1")
         mirrored = args.mirror is not None and (args.mirror / "model.zip").exists()
         resuming = (args.out / "model.zip").exists() or mirrored
-        if resuming and args.n_envs is not None:  # a run moving to another machine: recorded as an amendment
-            args.amendments.append(("n_envs", args.n_envs))
+        if resuming and hasattr(args, "config_n_envs"):  # a run moving to another machine: recorded as an amendment
+            args.amendments.append(("n_envs", args.config_n_envs))
         if not resuming:  # a fresh run: its configuration is checked before anything is written
             config = config_from_args(args)  # TrainConfig checks its fields and values
             if args.amendments:

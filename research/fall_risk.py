@@ -1,0 +1,553 @@
+"""A learned fall-risk map: which picks drop an object, predicted from the camera alone.
+
+Issue 10's learned policies lose most of their open-loop episodes to falls: objects dragged out of
+the cabinet by the carry of a pick (`results/models/falls.md`). The privileged lookahead
+(`shelf_env.privileged.lookahead`) avoids them by trying each pick in a forked copy of the simulator, which a
+robot cannot do. Reinforcement learning from the episodes' terminal rewards did not teach the
+Q-maps to avoid them either (docs/experiments/): a fall is one terminal transition per
+episode, and the Q-value of a 10 % risky pick is close to that of a safe one under the paper's
+reward. This module learns the risk directly, as a supervised problem with dense labels:
+
+- `collect_episode` plays a training scene (training objects, seeds of their own) and, at every
+  step, tries several picks in forked copies of the env (`shelf_env.privileged.lookahead.probe_step`): the
+  H-d candidate of every visible object, one random graspable cell of every visible object, and
+  the greedy pick of a driving model. Each probe is a label: did the pick end the episode invalid
+  (an object fell, the scene did not come to rest)? The step it then executes is a safe one when
+  there is one (the driving model's when safe, else the first safe H-d candidate, and a random
+  safe probe with probability ``explore``), so episodes reach the cluttered states of late steps.
+- `train_fall_risk` fits a `FallRiskModel` (the residual FCN of Fig. 4, one logit per cell, started
+  from a P+S model's pick FCN) with a binary cross-entropy at the probed cells only, mirrored
+  images and renamed classes (`shelf_env.symmetry`) as augmentation; it keeps the epoch and picks
+  the decision threshold that do best on held-out training episodes.
+- `FallFilter` wraps a policy at test time: it masks out the pick cells whose predicted risk is
+  over the threshold, and the policy chooses among the rest (a Q-map policy: its best remaining
+  action, a push where every pick is masked). It reads only the observation, so a robot can run
+  it; the labels it learned from came from the simulator, in training only.
+
+Commands (``python -m research.fall_risk -h``): ``collect`` (resumable, one file per episode,
+shardable over processes), ``train``, ``check`` (`greedy_check`). Evaluations name a filtered
+checkpoint ``<checkpoint>+fall-filter``: importing this module registers that wrapper
+(`shelf_env.policies`), which loads the model ``<stem>.fall_risk.pt`` beside the checkpoint
+(`fall_filter_path`); ``python -m research.evaluate`` is shelf-evaluate with it registered.
+
+Measured (docs/experiments/fall-filter.md; ``bash results/fall_filter/run.sh``): 33 minutes of collection on
+two cores (1,551 states) give a held-out AUC of 0.77; the filter halves the invalid share of the
+shipped P+S's choice among the probed picks of held-out training episodes, but on issue 10's YCB
+scenes it cut the share of actions that drop an object only from 4.7 to 3.4 % and sorted no more.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import os
+import pathlib
+import sys
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+import torch.nn.functional as F
+
+from sb3_pixeldqn.files import write_atomically, write_json_atomically
+from sb3_pixeldqn.networks import DEFAULT_WIDTHS, ResidualFCN
+from shelf_env import params, policies
+from shelf_env.baselines.heuristics import ObservationView
+from shelf_env.privileged.lookahead import LookaheadDistance, probe_step
+from shelf_env.symmetry import PermuteClasses
+
+#: Seed of the collection's scenes (`collect_seed`): no evaluation or training run draws from it.
+COLLECT_SEED = 7001
+#: Most picks probed per state (each costs one env action).
+MAX_PROBES = 12
+
+
+def collect_seed(shard: int, episode: int) -> int:
+    """Reset seed of collection episode ``episode`` of shard ``shard``."""
+    return int(np.random.SeedSequence([COLLECT_SEED, shard, episode]).generate_state(1)[0])
+
+
+def probe_cells(hd: LookaheadDistance, view: ObservationView, greedy: tuple[int, int] | None,
+                rng: np.random.Generator, max_probes: int = MAX_PROBES) -> list[tuple[int, int]]:
+    """The pick cells to label in one state: H-d's candidates (one per visible unsorted object, or
+    the uncovering picks when all look sorted), the driving model's greedy pick, then one random
+    graspable cell per visible object; without repeats, at most ``max_probes``. ``hd``: the episode's
+    H-d lookahead (only its candidate lists are used here, no probe)."""
+    cells = hd.candidates(view) or hd.uncover_candidates(view)
+    if greedy is not None:
+        cells.append(greedy)
+    for b in rng.permutation(np.unique(view.blob[view.graspable])):
+        rows, cols = np.nonzero(view.graspable & (view.blob == b))
+        i = int(rng.integers(len(rows)))
+        cells.append((int(rows[i]), int(cols[i])))
+    return list(dict.fromkeys((int(r), int(c)) for r, c in cells))[:max_probes]
+
+
+def collect_episode(env: gym.Env, model: Any, reset_seed: int, rng: np.random.Generator,
+                    explore: float = 0.2, max_probes: int = MAX_PROBES) -> dict[str, np.ndarray]:
+    """Play one scene from ``reset_seed`` and label picks at every step (see the module docstring).
+
+    Returns ``obs`` (T, C, H, W) uint8, the observations labelled, and ``probes`` (K, 4) int64 rows
+    ``(t, row, col, invalid)``: pick cell (row, col) of observation t ended the episode invalid (1)
+    or not (0). ``model``: a `PixelDoubleDQN` (or anything with its ``predict``) whose greedy pick is
+    probed and preferred when safe; None to drive with H-d's safe candidates only.
+    """
+    base: Any = env.unwrapped
+    codec = base.codec
+    hd = LookaheadDistance(env)
+    obs, _ = env.reset(seed=reset_seed)
+    observations: list[np.ndarray] = []
+    probes: list[tuple[int, int, int, int]] = []
+    for _ in range(base.max_actions):
+        view = ObservationView.from_observation(obs, hd.margin_cells)
+        if not view.graspable.any():
+            break
+        greedy_action = None if model is None else policies.masked_greedy(model, env, obs)
+        greedy = None
+        if greedy_action is not None:
+            name, row, col = codec.decode(greedy_action)
+            greedy = (row, col) if name == "pick" else None
+        cells = probe_cells(hd, view, greedy, rng, max_probes)
+        safe = []
+        for row, col in cells:
+            invalid = not probe_step(env, codec.encode("pick", row, col)).valid
+            probes.append((len(observations), row, col, int(invalid)))
+            if not invalid:
+                safe.append((row, col))
+        observations.append(np.asarray(obs, dtype=np.uint8))
+        if safe and rng.random() < explore:
+            row, col = safe[int(rng.integers(len(safe)))]
+            choice = codec.encode("pick", row, col)
+        elif greedy_action is not None and (greedy is None or greedy in safe):
+            choice = greedy_action  # the model's own action when it is a push or a safe pick
+        elif safe:
+            choice = codec.encode("pick", *safe[0])
+        else:
+            break  # every probed pick drops something: nothing safe to show from here
+        obs, _, terminated, truncated, _ = env.step(choice)
+        if terminated or truncated:
+            break
+    if not observations:
+        shape = base.observation_space.shape
+        return {"obs": np.zeros((0, *shape), np.uint8), "probes": np.zeros((0, 4), np.int64)}
+    return {"obs": np.stack(observations), "probes": np.asarray(probes, dtype=np.int64).reshape(-1, 4)}
+
+
+def save_episode(path: pathlib.Path, data: dict[str, np.ndarray], meta: np.ndarray) -> None:
+    """One episode's ``obs``, ``probes`` and ``meta`` (JSON) as a compressed ``.npz`` at exactly ``path``."""
+    with open(path, "wb") as f:
+        np.savez_compressed(f, meta=meta, obs=data["obs"], probes=data["probes"])
+
+
+def episode_path(out: pathlib.Path, shard: int, episode: int) -> pathlib.Path:
+    return out / f"shard{shard:02d}_ep{episode:05d}.npz"
+
+
+def collect(out: pathlib.Path, episodes: int, shard: int = 0, ns: tuple[int, ...] = tuple(range(3, 15)),
+            model_path: str | None = None, object_set: str = "train", explore: float = 0.2,
+            hours: float | None = None) -> int:
+    """Collect ``episodes`` episodes of shard ``shard`` into ``out`` (one ``.npz`` per episode, written
+    atomically; episodes already on disk are skipped, so a stopped collection resumes). N of each
+    episode is drawn from ``ns`` with the episode's own seed. Stops early after ``hours``. Returns
+    the number of episodes written now."""
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    if not ns or min(ns) < 1:
+        raise ValueError(f"ns must be numbers of objects >= 1, got {ns}")
+    if not 0.0 <= explore <= 1.0:
+        raise ValueError(f"explore must be a probability in [0, 1], got {explore}")
+    model = None
+    primitives: tuple[str, ...] = ("pick", "push")
+    pixel_size = params.PIXEL_SIZE
+    if model_path is not None:
+        from sb3_pixeldqn import PixelDoubleDQN
+        from shelf_env.evaluation.protocol import checkpoint_pixel_size, checkpoint_primitives
+
+        primitives, pixel_size = checkpoint_primitives(model_path), checkpoint_pixel_size(model_path)
+        model = PixelDoubleDQN.load(model_path, device="cpu")
+    start, written = time.monotonic(), 0
+    envs: dict[int, gym.Env] = {}
+    try:
+        for episode in range(episodes):
+            path = episode_path(out, shard, episode)
+            if path.exists():
+                continue
+            if hours is not None and time.monotonic() - start > hours * 3600:
+                break
+            seed = collect_seed(shard, episode)
+            rng = np.random.default_rng(seed)
+            n = int(ns[int(rng.integers(len(ns)))])
+            if n not in envs:
+                envs[n] = gym.make("ShelfSort-v0", num_objects=n, object_set=object_set, primitives=primitives,
+                                   pixel_size=pixel_size)
+            data = collect_episode(envs[n], model, seed, rng, explore)
+            meta = np.array(json.dumps({"num_objects": n, "reset_seed": seed, "object_set": object_set,
+                                        "model": model_path, "explore": explore, "pixel_size": pixel_size}))
+            write_atomically(path, functools.partial(save_episode, data=data, meta=meta))
+            written += 1
+            labels = data["probes"][:, 3]
+            print(f"shard {shard} episode {episode}: N={n}, {len(data['obs'])} states, {len(labels)} probes, "
+                  f"{int(labels.sum())} invalid", flush=True)
+    finally:
+        for env in envs.values():
+            env.close()
+    return written
+
+
+def load_dataset(folder: pathlib.Path) -> list[dict[str, np.ndarray]]:
+    """Every collected episode of ``folder`` (sorted by name), as dicts of ``obs`` and ``probes``."""
+    files = sorted(folder.glob("shard*_ep*.npz"))
+    if not files:
+        raise ValueError(f"no collected episodes (shard*_ep*.npz) in {folder}")
+    episodes = []
+    for f in files:
+        with np.load(f) as data:
+            if len(data["obs"]):
+                episodes.append({"obs": data["obs"], "probes": data["probes"]})
+    return episodes
+
+
+class FallRiskModel(th.nn.Module):
+    """Observation ``(B, C, H, W)`` uint8 -> logit of "a pick here ends the episode invalid", ``(B, H, W)``."""
+
+    def __init__(self, in_channels: int, widths: tuple[int, int, int] = DEFAULT_WIDTHS,
+                 threshold: float = 0.5) -> None:
+        super().__init__()
+        self.fcn = ResidualFCN(in_channels, widths)
+        self.in_channels, self.widths = in_channels, tuple(int(w) for w in widths)
+        self.threshold = float(threshold)
+        self.info: dict[str, Any] = {}  # what training reported (`train_fall_risk`), set by `load`
+
+    def forward(self, obs: th.Tensor) -> th.Tensor:
+        return self.fcn(obs.float() / 255.0)
+
+    def risk(self, obs: np.ndarray) -> np.ndarray:
+        """Predicted probability per cell, ``(H, W)`` for one observation or ``(B, H, W)`` for a batch."""
+        x = th.as_tensor(np.asarray(obs))
+        single = x.dim() == 3
+        with th.no_grad():
+            p = th.sigmoid(self(x[None] if single else x)).numpy()
+        return p[0] if single else p
+
+    def save(self, path: str | pathlib.Path, info: dict[str, Any] | None = None) -> None:
+        """Weights and settings in one torch file, written atomically."""
+        payload = {"state_dict": self.state_dict(), "in_channels": self.in_channels, "widths": self.widths,
+                   "threshold": self.threshold, "info": info or {}}
+        write_atomically(path, lambda tmp: th.save(payload, tmp))
+
+    @classmethod
+    def load(cls, path: str | pathlib.Path) -> FallRiskModel:
+        path = pathlib.Path(path)
+        if not path.is_file():
+            raise ValueError(f"fall-risk model {str(path)!r} does not exist "
+                             "(python -m research.fall_risk train makes one)")
+        try:
+            payload = th.load(path, map_location="cpu", weights_only=True)
+            model = cls(int(payload["in_channels"]), tuple(payload["widths"]), float(payload["threshold"]))
+            model.load_state_dict(payload["state_dict"])
+        except Exception as err:  # noqa: BLE001  (any failure to read is a bad file)
+            raise ValueError(f"{path} is not a readable fall-risk model: {err}") from err
+        model.info = payload.get("info", {})
+        model.eval()
+        return model
+
+
+@dataclass
+class Split:
+    obs: th.Tensor  # (S, C, H, W) uint8
+    state: th.Tensor  # (K,) index into obs
+    cell: th.Tensor  # (K,) flat cell index
+    label: th.Tensor  # (K,) float 0/1
+
+
+def make_split(episodes: list[dict[str, np.ndarray]]) -> Split:
+    obs, state, cell, label, offset = [], [], [], [], 0
+    for ep in episodes:
+        cols = ep["obs"].shape[-1]
+        obs.append(th.as_tensor(ep["obs"]))
+        p = th.as_tensor(ep["probes"])
+        state.append(p[:, 0] + offset)
+        cell.append(p[:, 1] * cols + p[:, 2])
+        label.append(p[:, 3].float())
+        offset += len(ep["obs"])
+    return Split(th.cat(obs), th.cat(state), th.cat(cell), th.cat(label))
+
+
+def logits_at(model: FallRiskModel, obs: th.Tensor, index: th.Tensor, cells: th.Tensor,
+              mirror: bool = False) -> th.Tensor:
+    """The model's logit at each (observation ``obs[index[k]]``, flat cell ``cells[k]``), one FCN pass
+    per observation; with ``mirror`` on the left-right mirrored images (and cells)."""
+    width = obs.shape[-1]
+    if mirror:
+        obs = th.flip(obs, dims=(-1,))
+        cells = (cells // width) * width + (width - 1 - cells % width)
+    return model(obs).flatten(1)[index, cells]
+
+
+def scores(model: FallRiskModel, split: Split, chunk: int = 64) -> np.ndarray:
+    """Predicted probabilities at every labelled probe of ``split``."""
+    out = np.zeros(len(split.label), np.float32)
+    with th.no_grad():
+        for s0 in range(0, len(split.obs), chunk):
+            sel = (split.state >= s0) & (split.state < s0 + chunk)
+            if sel.any():
+                logits = model(split.obs[s0:s0 + chunk]).flatten(1)
+                out[sel.numpy()] = th.sigmoid(logits[split.state[sel] - s0, split.cell[sel]]).numpy()
+    return out
+
+
+def auc(labels: np.ndarray, p: np.ndarray) -> float:
+    """Area under the ROC curve (the probability that a random positive scores above a random negative)."""
+    pos, neg = p[labels == 1], p[labels == 0]
+    if not len(pos) or not len(neg):
+        return float("nan")
+    both = np.concatenate([pos, neg])
+    values, inverse = np.unique(both, return_inverse=True)
+    order = np.argsort(both, kind="stable")
+    ranks = np.empty(len(both))
+    ranks[order] = np.arange(1, len(both) + 1)
+    ranks = (np.bincount(inverse, ranks) / np.bincount(inverse))[inverse]  # ties share their mean rank
+    return float((ranks[:len(pos)].sum() - len(pos) * (len(pos) + 1) / 2) / (len(pos) * len(neg)))
+
+
+def pick_threshold(labels: np.ndarray, p: np.ndarray) -> float:
+    """The threshold that maximises balanced accuracy (mean of the recall of falls and of safe picks)."""
+    best, best_t = -1.0, 0.5
+    for t in np.linspace(0.05, 0.95, 19):
+        flagged = p >= t
+        recall = flagged[labels == 1].mean() if (labels == 1).any() else 0.0
+        specificity = (~flagged[labels == 0]).mean() if (labels == 0).any() else 0.0
+        if (recall + specificity) / 2 > best:
+            best, best_t = (recall + specificity) / 2, float(t)
+    return best_t
+
+
+def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = None, epochs: int = 8,
+                    batch: int = 32, lr: float = 3e-4, val_fraction: float = 0.15, seed: int = 0) -> dict[str, Any]:
+    """Fit a `FallRiskModel` on the episodes of ``data`` (see the module docstring) and save it to
+    ``out``. The last ``val_fraction`` of the episodes (by file name) are held out: the epoch whose
+    weights rank their probes best (AUC) is kept and the threshold is chosen there. The returned
+    report (also the file's ``info``) gives their AUC and the recall of falls and of safe picks at
+    the threshold. ``init``: a P+S / S zip whose pick FCN starts the model."""
+    if epochs < 1 or batch < 1 or not 0 < val_fraction < 1:
+        raise ValueError(f"need epochs >= 1, batch >= 1 and 0 < val_fraction < 1; got {epochs}, {batch}, "
+                         f"{val_fraction}")
+    th.manual_seed(seed)
+    episodes = load_dataset(data)
+    n_val = max(1, int(round(len(episodes) * val_fraction)))
+    if len(episodes) - n_val < 1:
+        raise ValueError(f"{data} has {len(episodes)} episodes with states; need at least 2 for a held-out split")
+    train, val = make_split(episodes[:-n_val]), make_split(episodes[-n_val:])
+    model = FallRiskModel(int(train.obs.shape[1]))
+    if init is not None:
+        from sb3_pixeldqn import PixelDoubleDQN
+
+        source = PixelDoubleDQN.load(init, device="cpu").policy.q_net.fcns["pick"]
+        model.fcn.load_state_dict(source.state_dict())
+    positives = float(train.label.mean())
+    pos_weight = th.tensor((1 - positives) / max(positives, 1e-6))
+    optimizer = th.optim.Adam(model.parameters(), lr=lr, weight_decay=2e-5)
+    rng = np.random.default_rng(seed)
+    states = np.arange(len(train.obs))
+    permute = PermuteClasses()
+    history: list[dict[str, float]] = []
+    best: tuple[float, int, dict[str, th.Tensor]] = (-1.0, epochs, {})
+    for epoch in range(epochs):
+        model.train()
+        losses = []
+        for chunk in np.array_split(rng.permutation(states), max(1, len(states) // batch)):
+            sel = th.as_tensor(np.isin(train.state.numpy(), chunk))
+            if not sel.any():
+                continue
+            local = {int(s): i for i, s in enumerate(chunk)}
+            idx = th.as_tensor([local[int(s)] for s in train.state[sel]])
+            images = train.obs[th.as_tensor(chunk)]
+            perm = rng.permutation(3)
+            if (perm != np.arange(3)).any():  # falls do not depend on a class: rename the classes
+                images = th.as_tensor(np.stack([permute.observation(o, perm) for o in images.numpy()]))
+            mirror = bool(rng.random() < 0.5)
+            logits = logits_at(model, images, idx, train.cell[sel], mirror)
+            loss = F.binary_cross_entropy_with_logits(logits, train.label[sel], pos_weight=pos_weight)
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+            losses.append(float(loss.detach()))
+        model.eval()
+        p = scores(model, val)
+        history.append({"epoch": epoch + 1, "train_loss": float(np.mean(losses)), "val_auc": auc(val.label.numpy(), p)})
+        print(json.dumps(history[-1]), flush=True)
+        if history[-1]["val_auc"] > best[0]:  # keep the epoch that ranks held-out picks best
+            best = (history[-1]["val_auc"], epoch + 1, {k: v.clone() for k, v in model.state_dict().items()})
+    if best[2]:  # (with no held-out fall to rank, the AUC is undefined and the last epoch stays)
+        model.load_state_dict(best[2])
+    p, labels = scores(model, val), val.label.numpy()
+    model.threshold = pick_threshold(labels, p)
+    flagged = p >= model.threshold
+    report = {"obs_shape": list(train.obs.shape[1:]),
+              "train_states": len(train.obs), "train_probes": len(train.label), "train_invalid": int(train.label.sum()),
+              "val_states": len(val.obs), "val_probes": len(labels), "val_invalid": int(labels.sum()),
+              "val_auc": auc(labels, p), "threshold": model.threshold,
+              "val_recall_invalid": float(flagged[labels == 1].mean()) if (labels == 1).any() else float("nan"),
+              "val_recall_valid": float((~flagged[labels == 0]).mean()) if (labels == 0).any() else float("nan"),
+              "epochs": epochs, "best_epoch": best[1],
+              "init": init, "history": history}
+    model.save(out, report)
+    return report
+
+
+def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
+                 val_fraction: float = 0.15) -> dict[str, Any]:
+    """What the filter does to a model's choice on the held-out episodes of ``data`` (the split of
+    `train_fall_risk`): at each state, the pick the model values most among the probed cells, and
+    the one it values most among those the filter keeps (itself where none is kept), with the
+    share of each that ended the episode invalid in the forked copy, beside the share of all probes."""
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    episodes = load_dataset(data)
+    val = episodes[-max(1, int(round(len(episodes) * val_fraction))):]
+    model = PixelDoubleDQN.load(checkpoint, device="cpu")
+    pick = [name for name, _ in model.policy.maps].index("pick")
+    greedy, filtered, states = [], [], 0
+    for ep in val:
+        for t, obs in enumerate(ep["obs"]):
+            probes = ep["probes"][ep["probes"][:, 0] == t]
+            if not len(probes):
+                continue
+            q = model.policy.q_map_values(obs)[pick][probes[:, 1], probes[:, 2]]
+            kept = risk.risk(obs)[probes[:, 1], probes[:, 2]] < risk.threshold
+            greedy.append(probes[int(np.argmax(q)), 3])
+            filtered.append(probes[int(np.argmax(np.where(kept, q, -np.inf))), 3] if kept.any() else greedy[-1])
+            states += 1
+    labels = np.concatenate([ep["probes"][:, 3] for ep in val])
+    return {"checkpoint": checkpoint, "val_states": states, "probes_invalid": float(labels.mean()),
+            "greedy_invalid": float(np.mean(greedy)), "filtered_invalid": float(np.mean(filtered))}
+
+
+class FallFilter:
+    """Wrap ``policy`` (SB3's ``predict`` with ``action_masks``): pick cells whose predicted fall risk
+    is at or over ``risk.threshold`` are masked out before the policy chooses (see the module
+    docstring). Where that leaves no allowed action, the policy chooses as if unfiltered. Counts in
+    ``stats``: ``masked`` (decisions where at least one allowed pick cell was masked out) and
+    ``unfiltered`` (decisions where nothing allowed was left, so the filter stood aside)."""
+
+    def __init__(self, policy: Any, risk: FallRiskModel, map_names: tuple[str, ...], rows: int, cols: int) -> None:
+        self.policy, self.risk = policy, risk
+        self.observation_space, self.action_space = policy.observation_space, policy.action_space
+        if "pick" not in map_names:
+            raise ValueError(f"FallFilter needs a pick map; the policy's maps are {map_names}")
+        self.pick, self.n_maps, self.rows, self.cols = map_names.index("pick"), len(map_names), rows, cols
+        if int(self.action_space.n) != self.n_maps * rows * cols:
+            raise ValueError(f"action space {self.action_space} is not {self.n_maps} maps of {rows}x{cols}")
+        trained_on = getattr(risk, "info", {}).get("obs_shape")
+        if trained_on is not None and tuple(trained_on) != tuple(self.observation_space.shape):
+            raise ValueError(f"the fall-risk model was trained on observations of shape {tuple(trained_on)}; the "
+                             f"policy's are {tuple(self.observation_space.shape)} (another cell size or layout)")
+        self.acts_masked = bool(getattr(policy, "acts_masked", True))
+        self.stats = {"masked": 0, "unfiltered": 0}
+
+    def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True, action_masks: np.ndarray | None = None) -> tuple[np.ndarray, Any]:
+        obs = np.asarray(observation)
+        if obs.shape != self.observation_space.shape:
+            raise ValueError(f"FallFilter acts on one observation of shape {self.observation_space.shape}, "
+                             f"got {obs.shape}")
+        allowed = (np.ones(int(self.action_space.n), bool) if action_masks is None
+                   else np.asarray(action_masks, bool).reshape(-1).copy())
+        maps = allowed.reshape(self.n_maps, self.rows, self.cols)
+        risky = self.risk.risk(obs) >= self.risk.threshold
+        if action_masks is None and not (maps[self.pick] & ~risky).any():
+            # a policy that gets no env masks (a heuristic) picks among object cells by itself: with
+            # every cell risky there is nothing to restrict it to
+            self.stats["unfiltered"] += 1
+            return self.policy.predict(obs, state=state, deterministic=deterministic)
+        filtered = allowed.copy()
+        filtered.reshape(self.n_maps, self.rows, self.cols)[self.pick] &= ~risky
+        self.stats["masked"] += int((maps[self.pick] & risky).any())
+        if not filtered.any():
+            self.stats["unfiltered"] += 1
+            filtered = allowed
+        action, state = self.policy.predict(obs, state=state, deterministic=deterministic, action_masks=filtered)
+        return action, state
+
+
+#: Appended to a checkpoint's path: play it under `FallFilter` with the fall-risk model of `fall_filter_path`.
+FALL_FILTER = "+fall-filter"
+
+
+def fall_filter_path(checkpoint: str | os.PathLike) -> pathlib.Path:
+    """The learned fall-risk model a ``<checkpoint>+fall-filter`` policy uses: ``<stem>.fall_risk.pt``
+    beside the checkpoint (``python -m research.fall_risk train --init <checkpoint>`` makes one)."""
+    path = pathlib.Path(checkpoint)
+    return path.with_name(path.stem + ".fall_risk.pt")
+
+
+def _check_filtered(base: str) -> None:
+    if base in policies.POLICIES:
+        raise ValueError(f"{FALL_FILTER} filters a checkpoint's picks with the fall-risk model saved beside it; "
+                         f"{base!r} is not a checkpoint")
+    model = fall_filter_path(base)
+    if not model.is_file():
+        raise ValueError(f"policy {base}{FALL_FILTER}: no fall-risk model at {model} (python -m "
+                         f"research.fall_risk train --init {base} --out {model} makes one)")
+
+
+def _filtered(agent: Any, env: gym.Env, base: str) -> FallFilter:
+    unwrapped: Any = env.unwrapped
+    return FallFilter(agent, FallRiskModel.load(fall_filter_path(base)), unwrapped.map_names, unwrapped.rows,
+                      unwrapped.cols)
+
+
+policies.register_wrapper(FALL_FILTER, _filtered, check=_check_filtered, files=lambda base: [fall_filter_path(base)])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m research.fall_risk", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    c = sub.add_parser("collect", help="label picks in forked copies of training scenes (resumable)")
+    c.add_argument("--out", type=pathlib.Path, required=True)
+    c.add_argument("--episodes", type=int, required=True, help="episodes of this shard (those on disk are skipped)")
+    c.add_argument("--shard", type=int, default=0)
+    c.add_argument("--ns", type=int, nargs="+", default=list(range(3, 15)))
+    c.add_argument("--model", default="examples/pretrained/p_s.zip", help="driving model ('none': H-d only)")
+    c.add_argument("--object-set", default="train")
+    c.add_argument("--explore", type=float, default=0.2)
+    c.add_argument("--hours", type=float, default=None)
+    t = sub.add_parser("train", help="fit the fall-risk model on collected episodes")
+    t.add_argument("--data", type=pathlib.Path, required=True)
+    t.add_argument("--out", type=pathlib.Path, required=True,
+                   help="the model file; <stem>.fall_risk.pt beside a checkpoint for <checkpoint>+fall-filter")
+    t.add_argument("--init", default="examples/pretrained/p_s.zip", help="zip whose pick FCN starts it ('none')")
+    t.add_argument("--epochs", type=int, default=8)
+    t.add_argument("--batch", type=int, default=32)
+    k = sub.add_parser("check", help="the filter's effect on a model's choice among the probed picks, held out")
+    k.add_argument("--data", type=pathlib.Path, required=True)
+    k.add_argument("--model", type=pathlib.Path, required=True, help="the fall-risk model (.pt)")
+    k.add_argument("--checkpoint", required=True, help="the P+S / S zip whose choice is filtered")
+    k.add_argument("--out", type=pathlib.Path, default=None, help="also write the result here (JSON)")
+    args = parser.parse_args(argv)
+    try:  # a bad input is one line on stderr and exit status 2, before anything is written
+        if args.command == "check":
+            result = greedy_check(args.data, FallRiskModel.load(args.model), args.checkpoint)
+            print(json.dumps(result, indent=1))
+            if args.out is not None:
+                write_json_atomically(args.out, result)
+        elif args.command == "collect":
+            model = None if args.model == "none" else args.model
+            collect(args.out, args.episodes, args.shard, tuple(args.ns), model, args.object_set, args.explore,
+                    args.hours)
+        else:
+            init = None if args.init == "none" else args.init
+            report = train_fall_risk(args.data, args.out, init, args.epochs, args.batch)
+            print(json.dumps({k: v for k, v in report.items() if k != "history"}, indent=1))
+    except ValueError as err:
+        print(f"python -m research.fall_risk {args.command}: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,5 +1,0 @@
-#!/usr/bin/env bash
-# P+S trained longer at N = 8 (scripts/train_p_s_long.sh) against the shipped P+S, H-d and H-a on
-# issue 10's seed-0 held-out scenes at N = 5, 8, 11 (30 runs each, YCB objects): results/p_s_long.
-# Extra arguments go to shelf-evaluate (scripts/evaluate_run.sh).
-exec bash "$(dirname "$0")/evaluate_run.sh" p_s_long "$@"

@@ -1,0 +1,203 @@
+"""Policies by name: the registry that evaluations, the demo and the CLI build every policy from.
+
+A policy is named by a string: a registered name (`register_policy`: ``"h-d"``, ``"h-a"``,
+``"random"``, the privileged ``"h-d-lookahead"`` and ``"h-a-lookahead"``) or the path of a
+`PixelDoubleDQN` zip (P+S or S; the env layout follows the checkpoint), followed by any registered
+wrappers (`register_wrapper`), innermost first: ``"examples/pretrained/p_s.zip+loop-breaker"``
+plays the checkpoint under `sb3_pixeldqn.LoopBreaker`. A wrapper changes what the policy does, so
+results with it get cells and labels of their own (`policy_label`: ``p_s+loop-breaker``).
+
+The product registers its own names and the loop breaker here; an experiment registers its own
+wrappers when it is imported (``research/fall_risk.py`` registers ``+fall-filter``), and the product
+never imports an experiment. `check_policy` validates a name before any work starts.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sb3_pixeldqn.loop_breaker import LoopBreaker
+from shelf_env import params
+from shelf_env.baselines.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
+from shelf_env.privileged.lookahead import LookaheadAccessibility, LookaheadDistance
+
+#: A registered policy: ``factory(env, seed)`` -> an object with SB3's ``predict``.
+PolicyFactory = Callable[[gym.Env, int], Any]
+
+
+@dataclass(frozen=True)
+class Wrapper:
+    """A registered wrapper: ``wrap(agent, env, base)`` wraps the agent of policy ``base`` (its name or
+    checkpoint path) acting in ``env``; ``check(base)`` raises a `ValueError` before any work starts
+    where the wrapper cannot apply (None: it applies to every policy); ``files(base)`` lists the files
+    beside the checkpoint that it reads (a learned model), which the evaluation fingerprints with it."""
+
+    suffix: str
+    wrap: Callable[[Any, gym.Env, str], Any]
+    check: Callable[[str], None] | None = None
+    files: Callable[[str], list[pathlib.Path]] | None = None
+
+
+POLICIES: dict[str, PolicyFactory] = {}
+WRAPPERS: dict[str, Wrapper] = {}
+
+
+def register_policy(name: str, factory: PolicyFactory) -> None:
+    """Make ``name`` a policy (``factory(env, seed)``); a name is registered once."""
+    if name in POLICIES:
+        raise ValueError(f"policy {name!r} is already registered")
+    POLICIES[name] = factory
+
+
+def register_wrapper(suffix: str, wrap: Callable[[Any, gym.Env, str], Any],
+                     check: Callable[[str], None] | None = None,
+                     files: Callable[[str], list[pathlib.Path]] | None = None) -> None:
+    """Make ``<policy><suffix>`` play ``<policy>`` under ``wrap`` (see `Wrapper`); re-registering the same
+    suffix replaces it (an experiment module imported twice)."""
+    if not suffix.startswith("+") or len(suffix) < 2:
+        raise ValueError(f"a wrapper suffix starts with '+', got {suffix!r}")
+    WRAPPERS[suffix] = Wrapper(suffix, wrap, check, files)
+
+
+def registering_modules() -> list[str]:
+    """The modules outside this one that registered policies or wrappers (an experiment's): a worker
+    process imports them (`import_modules`) so that it knows the same names as its parent."""
+    found = [f.__module__ for f in POLICIES.values()] + [w.wrap.__module__ for w in WRAPPERS.values()]
+    return sorted({m for m in found if m not in (__name__, "__main__", "__mp_main__")})
+
+
+def import_modules(modules: list[str]) -> None:
+    """Import ``modules`` (a worker's initializer: their registrations happen on import)."""
+    import importlib
+
+    for module in modules:
+        importlib.import_module(module)
+
+
+def policy_wrappers(policy: str) -> tuple[str, tuple[str, ...]]:
+    """``policy`` split into its base (a name or checkpoint path) and its wrappers, innermost first:
+    ``"p.zip+fall-filter+loop-breaker"`` -> ``("p.zip", ("+fall-filter", "+loop-breaker"))``."""
+    wrappers: list[str] = []
+    stripped = True
+    while stripped:
+        stripped = False
+        for suffix in WRAPPERS:
+            if policy.endswith(suffix) and len(policy) > len(suffix):
+                policy, wrappers, stripped = policy[:-len(suffix)], [suffix, *wrappers], True
+    return policy, tuple(wrappers)
+
+
+def policy_file(policy: str) -> str:
+    """The checkpoint path (or the name) of ``policy``, without its wrappers."""
+    return policy_wrappers(policy)[0]
+
+
+def policy_files(policy: str) -> list[pathlib.Path]:
+    """The files a checkpoint policy reads: the checkpoint, then those of its wrappers (empty for a name)."""
+    name, wrappers = policy_wrappers(policy)
+    if name in POLICIES:
+        return []
+    extra = [f for suffix in wrappers if WRAPPERS[suffix].files is not None
+             for f in WRAPPERS[suffix].files(name)]  # type: ignore[misc]
+    return [pathlib.Path(name), *extra]
+
+
+def is_named(policy: str) -> bool:
+    """Whether ``policy`` is a registered name (wrapped or not), not a checkpoint."""
+    return policy_file(policy) in POLICIES
+
+
+def policy_label(policy: str) -> str:
+    """Short name used in files and plots: the name itself, or a checkpoint's file stem, with its wrappers."""
+    if is_named(policy):
+        return policy
+    name, wrappers = policy_wrappers(policy)
+    return pathlib.Path(name).stem + "".join(wrappers)
+
+
+def checkpoint_primitives(path: str | os.PathLike) -> tuple[str, ...]:
+    """The env primitives a PixelDoubleDQN checkpoint was trained with (from its map layout)."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise ValueError(f"policy {str(path)!r} is neither one of {tuple(POLICIES)} nor an existing checkpoint file")
+    try:
+        data, _, _ = load_from_zip_file(path, load_data=True, device="cpu")
+    except Exception as err:  # noqa: BLE001  (any failure to read is a bad checkpoint)
+        raise ValueError(f"{path} is not a readable PixelDoubleDQN checkpoint: {err}") from err
+    maps = (data or {}).get("policy_kwargs", {}).get("maps")
+    names = {name for name, _ in maps} if maps else {"pick", "push"}
+    return ("pick", "push") if "push" in names else ("pick",)
+
+
+def checkpoint_pixel_size(path: str | os.PathLike) -> float:
+    """The heightmap cell size (m) a PixelDoubleDQN checkpoint was trained at, from its observation width."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    data, _, _ = load_from_zip_file(pathlib.Path(path), load_data=True, device="cpu")
+    cols = int((data or {})["observation_space"].shape[2])
+    return params.CABINET_WIDTH / cols
+
+
+def policy_pixel_size(policy: str) -> float:
+    """Cell size of the env a policy acts in: the checkpoint's, or the env default for named policies."""
+    return params.PIXEL_SIZE if is_named(policy) else checkpoint_pixel_size(policy_file(policy))
+
+
+def check_policy(policy: str, primitives: tuple[str, ...] | None = None) -> tuple[str, ...]:
+    """Validate a policy name (and a forced layout) before work starts; returns the env primitives."""
+    name, wrappers = policy_wrappers(policy)
+    for suffix in wrappers:
+        check = WRAPPERS[suffix].check
+        if check is not None:
+            check(name)
+    if is_named(policy):
+        return primitives or ("pick", "push")
+    needed = checkpoint_primitives(name)
+    if primitives is not None and tuple(primitives) != needed:
+        raise ValueError(
+            f"checkpoint {policy} was trained with primitives {needed} but the evaluation env has {tuple(primitives)}"
+        )
+    return needed
+
+
+def make_policy(policy: str, env: gym.Env, seed: int = 0) -> Any:
+    """An object with SB3's ``predict`` for ``policy`` acting in ``env``, under its wrappers."""
+    name, wrappers = policy_wrappers(policy)
+    agent: Any
+    if name in POLICIES:
+        agent = POLICIES[name](env, seed)
+    else:
+        from sb3_pixeldqn import PixelDoubleDQN
+
+        agent = PixelDoubleDQN.load(name, env=env, device="cpu")
+    for suffix in wrappers:
+        agent = WRAPPERS[suffix].wrap(agent, env, name)
+    return agent
+
+
+def masked_greedy(model: Any, env: gym.Env, obs: Any) -> int:
+    """``model``'s greedy action (SB3's ``predict``) within the env's current action masks."""
+    masks = env.get_wrapper_attr("action_masks")()
+    action, _ = model.predict(obs, deterministic=True, action_masks=masks)
+    return int(np.asarray(action).reshape(-1)[0])
+
+
+#: The loop breaker's suffix (`sb3_pixeldqn.LoopBreaker` with its defaults).
+LOOP_BREAKER = "+loop-breaker"
+
+register_policy("h-d", lambda env, seed: DistanceHeuristic(env))
+register_policy("h-a", lambda env, seed: AccessibilityHeuristic(env))
+# privileged diagnostics (they read the simulator), not baselines: shelf_env.privileged.lookahead
+register_policy("h-d-lookahead", lambda env, seed: LookaheadDistance(env))
+register_policy("h-a-lookahead", lambda env, seed: LookaheadAccessibility(env))
+register_policy("random", lambda env, seed: RandomPolicy(env, seed=seed))
+register_wrapper(LOOP_BREAKER, lambda agent, env, base: LoopBreaker(agent))

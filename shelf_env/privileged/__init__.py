@@ -1,0 +1,7 @@
+"""Privileged teachers that read the simulator through forked copies (a robot cannot): the lookahead
+(`lookahead`: `probe_step`, ``h-d-lookahead``) and the teacher dataset built with it (`dataset`).
+Training and diagnostics only; never a baseline."""
+
+from shelf_env.privileged.lookahead import LookaheadAccessibility, LookaheadDistance, Outcome, probe_step
+
+__all__ = ["LookaheadAccessibility", "LookaheadDistance", "Outcome", "probe_step"]

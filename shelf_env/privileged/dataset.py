@@ -1,0 +1,440 @@
+"""The teacher dataset: labelled states of training scenes, for distilling a privileged teacher into the Q-maps.
+
+A camera-only policy has to learn which actions drop an object and which make progress; the
+episodes' own terminal rewards teach that too slowly (one fall per episode). Here every visited
+state carries many labels, each the exact outcome of one masked action tried in a forked copy of
+the simulator (`shelf_env.privileged.lookahead.probe_step`): did an object fall, did the scene stay valid,
+how did the number of sorted objects change, did the step sort the scene. The labelled actions,
+without repeats (at most ``max_probes``; past that only the teacher's and the greedy action): the
+teacher's own probes (its chosen action among them), the driving model's greedy masked action, one
+random graspable cell of every visible object, the teacher's push candidates, random masked actions.
+
+The teacher is privileged (it reads the simulator): today the one-step lookahead on H-d
+(``h-d-lookahead``, `shelf_env.privileged.lookahead.LookaheadDistance`), which has no value estimate
+(``teacher_value`` is NaN). The executed action is the teacher's choice, or, with probability
+``explore``, the model's greedy action when its probe kept the scene valid, so the states cover
+where the learner goes too. An episode stops at its end (sorted, invalid, 40 actions) or when no
+probed action keeps the scene valid.
+
+Storage (one compressed ``.npz`` per shard, a shard = ``episodes_per_shard`` whole episodes,
+written atomically, so a collection killed mid-shard leaves no partial shard): ``meta`` (JSON: the
+format, the env's dynamics version, the observation layout, the teacher, per episode the reset
+seed, N and the executed actions, and the wall-clock seconds the shard took), ``obs`` (S, C, H, W)
+uint8, per state ``state_episode``, ``state_step``, ``teacher_action``, ``teacher_value``,
+``executed_action``, and per label ``label_state`` (index into ``obs``), ``label_action``,
+``label_valid``, ``label_fell``, ``label_success``, ``label_dsorted`` and ``label_source``
+(`SOURCES`). Observations are stored, not only (seed, actions): PyBullet's episodes are
+bit-identical on one machine but not across machines, so a replay elsewhere could see another
+state than the one labelled. The seeds and actions are kept too (`replay_states` checks them on
+the machine that collected them).
+
+Scenes: training objects, reset seeds from `DATASET_SEED` (no evaluation draws from it), N uniform
+over ``ns``. Commands (``python -m shelf_env.privileged.dataset -h``): ``collect`` (resumable, a wall-clock
+budget, ``--workers K`` processes with shard series of their own) and ``status``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import multiprocessing
+import os
+import pathlib
+import platform
+import sys
+import time
+import zipfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sb3_pixeldqn.files import write_atomically
+from shelf_env.baselines.heuristics import ObservationView
+from shelf_env.env import DYNAMICS_VERSION
+from shelf_env.policies import masked_greedy
+from shelf_env.privileged.lookahead import LookaheadDistance, Outcome, probe_step
+
+#: Version of the shard layout below; a shard of another is refused.
+FORMAT = 1
+#: Seed of the dataset's scenes (`scene_seed`); no training run or evaluation draws from it.
+DATASET_SEED = 9038
+#: Where each label's action came from (``label_source``).
+SOURCES = ("greedy", "teacher", "object", "push", "random")
+#: Observation layout of the dataset: that of the shipped P+S (10 mm cells, pick + pushes).
+PIXEL_SIZE = 0.01
+PRIMITIVES = ("pick", "push")
+DEFAULT_NS = tuple(range(3, 15))
+STATE_KEYS = ("state_episode", "state_step", "teacher_action", "teacher_value", "executed_action")
+LABEL_KEYS = ("label_state", "label_action", "label_valid", "label_fell", "label_success", "label_dsorted",
+              "label_source")
+
+
+def scene_seed(series: int, shard: int, episode: int) -> int:
+    """Reset seed of episode ``episode`` of shard ``shard`` of series ``series``."""
+    return int(np.random.SeedSequence([DATASET_SEED, series, shard, episode]).generate_state(1)[0])
+
+
+def shard_path(out: pathlib.Path, series: int, shard: int) -> pathlib.Path:
+    return out / f"s{series:02d}_{shard:05d}.npz"
+
+
+def layout(env: gym.Env) -> dict[str, Any]:
+    """The observation layout a shard records and a reader checks."""
+    base: Any = env.unwrapped
+    return {"obs_shape": list(base.observation_space.shape), "pixel_size": float(base.camera.pixel_size),
+            "map_names": list(base.codec.map_names)}
+
+
+class Episode:
+    """What one collected episode adds to a shard."""
+
+    def __init__(self) -> None:
+        self.obs: list[np.ndarray] = []
+        self.states: dict[str, list[Any]] = {k: [] for k in STATE_KEYS}
+        self.labels: dict[str, list[Any]] = {k: [] for k in LABEL_KEYS}
+        self.actions: list[int] = []
+
+
+def probe_actions(env: gym.Env, teacher: LookaheadDistance, view: ObservationView, greedy: int | None,
+                  rng: np.random.Generator, max_probes: int) -> list[tuple[int, int]]:
+    """``(action, source)`` to label beyond the teacher's own probes, in order (see the module docstring)."""
+    codec = teacher.codec
+    out: list[tuple[int, int]] = []
+    if greedy is not None:
+        out.append((greedy, SOURCES.index("greedy")))
+    for b in rng.permutation(np.unique(view.blob[view.graspable])):
+        rows, cols = np.nonzero(view.graspable & (view.blob == b))
+        i = int(rng.integers(len(rows)))
+        out.append((codec.encode("pick", int(rows[i]), int(cols[i])), SOURCES.index("object")))
+    out += [(a, SOURCES.index("push")) for a in teacher.push_candidates(view)[:4]]
+    allowed = np.flatnonzero(env.get_wrapper_attr("action_masks")())
+    if len(allowed):
+        out += [(int(a), SOURCES.index("random")) for a in rng.choice(allowed, size=min(3, len(allowed)),
+                                                                      replace=False)]
+    return out[:max_probes]
+
+
+def collect_episode(env: gym.Env, model: Any, seed: int, rng: np.random.Generator, explore: float = 0.3,
+                    max_probes: int = 24) -> Episode:
+    """Play the scene of ``seed`` with the teacher and label every visited state (module docstring).
+    ``model``: anything with SB3's ``predict(obs, deterministic, action_masks)``, whose greedy action is
+    labelled first and sometimes executed; None for the teacher alone."""
+    base: Any = env.unwrapped
+    teacher = LookaheadDistance(env)
+    episode = Episode()
+    obs, info = env.reset(seed=seed)
+    sorted_now = int(info["num_sorted"])
+    for step in range(base.max_actions):
+        view = ObservationView.from_observation(obs, teacher.margin_cells)
+        if not view.graspable.any():
+            break
+        greedy = None if model is None else masked_greedy(model, env, obs)
+        choice = int(teacher.predict(obs, deterministic=True)[0])
+        outcomes: dict[int, tuple[Outcome, int]] = {a: (o, SOURCES.index("teacher")) for a, o in teacher._probed}
+        for action, source in probe_actions(env, teacher, view, greedy, rng, max_probes):
+            if len(outcomes) >= max_probes and source != SOURCES.index("greedy"):
+                break  # the greedy action (first) is labelled whatever the teacher's probes took
+            if action in outcomes:
+                if source == SOURCES.index("greedy"):  # the greedy label keeps its own source
+                    outcomes[action] = (outcomes[action][0], source)
+                continue
+            outcomes[action] = (probe_step(env, action), source)
+        if choice not in outcomes:
+            outcomes[choice] = (probe_step(env, choice), SOURCES.index("teacher"))
+        t = len(episode.obs)
+        episode.obs.append(np.asarray(obs, dtype=np.uint8))
+        for action, (outcome, source) in outcomes.items():
+            labels = episode.labels
+            labels["label_state"].append(t)
+            labels["label_action"].append(action)
+            labels["label_valid"].append(outcome.valid)
+            labels["label_fell"].append(outcome.fell)
+            labels["label_success"].append(outcome.is_success)
+            labels["label_dsorted"].append(int(outcome.num_sorted or 0) - sorted_now)
+            labels["label_source"].append(source)
+        valid = [a for a, (o, _) in outcomes.items() if o.valid]
+        executed = choice
+        if greedy is not None and greedy in valid and rng.random() < explore:
+            executed = greedy
+        elif choice not in valid:
+            executed = valid[int(rng.integers(len(valid)))] if valid else -1
+        for key, value in zip(STATE_KEYS, (0, step, choice, np.nan, executed)):
+            episode.states[key].append(value)
+        if executed < 0:
+            break  # nothing probed keeps the scene valid: no state after this one to show
+        obs, _, terminated, truncated, info = env.step(executed)
+        episode.actions.append(executed)
+        sorted_now = int(info["num_sorted"])
+        if terminated or truncated:
+            break
+    return episode
+
+
+def save_shard(path: pathlib.Path, meta: dict[str, Any], episodes: list[Episode], obs_shape: Sequence[int]) -> None:
+    """Write the shard's arrays to exactly ``path`` (`write_atomically` moves it into place)."""
+    arrays: dict[str, np.ndarray] = {}
+    obs = [o for ep in episodes for o in ep.obs]
+    arrays["obs"] = np.stack(obs) if obs else np.zeros((0, *obs_shape), np.uint8)
+    offset = 0
+    states: dict[str, list[Any]] = {k: [] for k in STATE_KEYS}
+    labels: dict[str, list[Any]] = {k: [] for k in LABEL_KEYS}
+    for i, ep in enumerate(episodes):
+        for k in STATE_KEYS:
+            states[k] += [i] * len(ep.obs) if k == "state_episode" else ep.states[k]
+        for k in LABEL_KEYS:
+            labels[k] += [s + offset for s in ep.labels[k]] if k == "label_state" else ep.labels[k]
+        offset += len(ep.obs)
+    dtypes = {"teacher_value": np.float32, "label_valid": bool, "label_fell": bool, "label_success": bool,
+              "label_dsorted": np.int8, "label_source": np.uint8}
+    for k, v in {**states, **labels}.items():
+        arrays[k] = np.asarray(v, dtype=dtypes.get(k, np.int64))
+    with open(path, "wb") as f:
+        np.savez_compressed(f, meta=np.array(json.dumps(meta)), **arrays)  # type: ignore[arg-type]
+
+
+@dataclass
+class Shard:
+    """One shard as read back (`load_shard`)."""
+
+    path: pathlib.Path
+    meta: dict[str, Any]
+    arrays: dict[str, np.ndarray]
+
+    @property
+    def num_states(self) -> int:
+        return len(self.arrays["obs"])
+
+    @property
+    def num_labels(self) -> int:
+        return len(self.arrays["label_action"])
+
+
+def load_shard(path: pathlib.Path, expect_layout: dict[str, Any] | None = None) -> Shard:
+    """Read and check one shard; a truncated file, another format, another env dynamics version or (with
+    ``expect_layout``) another observation layout is a `ValueError` that names the shard."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
+        raise ValueError(f"dataset shard {path}: unreadable (truncated or not a shard): {err}") from err
+    if "meta" not in arrays:
+        raise ValueError(f"dataset shard {path}: no meta entry (not a shard of this dataset)")
+    meta = json.loads(str(arrays.pop("meta")))
+    if meta.get("format") != FORMAT:
+        raise ValueError(f"dataset shard {path}: format {meta.get('format')!r}, this version reads {FORMAT}")
+    if meta.get("dynamics_version") != DYNAMICS_VERSION:
+        raise ValueError(f"dataset shard {path}: collected with env dynamics version {meta.get('dynamics_version')!r}, "
+                         f"this ShelfSort-v0 is version {DYNAMICS_VERSION}: its labels need not hold here")
+    if expect_layout is not None and meta.get("layout") != expect_layout:
+        raise ValueError(f"dataset shard {path}: observation layout {meta.get('layout')} is not {expect_layout}")
+    missing = [k for k in ("obs", *STATE_KEYS, *LABEL_KEYS) if k not in arrays]
+    if missing:
+        raise ValueError(f"dataset shard {path}: missing arrays {missing}")
+    if list(arrays["obs"].shape[1:]) != list(meta["layout"]["obs_shape"]):
+        raise ValueError(f"dataset shard {path}: observations of shape {arrays['obs'].shape[1:]}, its meta says "
+                         f"{meta['layout']['obs_shape']}")
+    n_states, n_labels = len(arrays["obs"]), len(arrays["label_action"])
+    if any(len(arrays[k]) != n_states for k in STATE_KEYS) or any(len(arrays[k]) != n_labels for k in LABEL_KEYS):
+        raise ValueError(f"dataset shard {path}: per-state or per-label arrays of unequal lengths")
+    if n_labels and (arrays["label_state"].min() < 0 or arrays["label_state"].max() >= n_states):
+        raise ValueError(f"dataset shard {path}: a label points outside the shard's states")
+    return Shard(path, meta, arrays)
+
+
+def shard_files(folder: pathlib.Path) -> list[pathlib.Path]:
+    return sorted(folder.glob("s[0-9][0-9]_[0-9][0-9][0-9][0-9][0-9].npz"))
+
+
+def load_dataset(folder: pathlib.Path, expect_layout: dict[str, Any] | None = None) -> list[Shard]:
+    """Every shard of ``folder``, checked (`load_shard`); a `ValueError` if there is none."""
+    files = shard_files(folder)
+    if not files:
+        raise ValueError(f"no dataset shards (sNN_NNNNN.npz) in {folder}")
+    return [load_shard(f, expect_layout) for f in files]
+
+
+def replay_states(shard: Shard, max_labels: int | None = None) -> tuple[int, int, list[str]]:
+    """Replay a shard on this machine and check it: every state's observation against (reset seed,
+    executed actions) and every label (up to ``max_labels``) against a real ``env.step`` of its action
+    from that state. Returns ``(states checked, labels checked, mismatches)``; bit-identical only on the
+    machine (and library build) that collected the shard."""
+    layout_ = shard.meta["layout"]
+    primitives = ("pick", "push") if "push_left" in layout_["map_names"] else ("pick",)
+    env = gym.make("ShelfSort-v0", num_objects=1, object_set=shard.meta["object_set"], primitives=primitives,
+                   pixel_size=layout_["pixel_size"])
+    a = shard.arrays
+    mismatches: list[str] = []
+    checked = 0
+    try:
+        for i, ep in enumerate(shard.meta["episodes"]):
+            env.unwrapped.set_num_objects(ep["num_objects"])  # type: ignore[attr-defined]
+            states = np.flatnonzero(a["state_episode"] == i)
+
+            def state_at(t: int, ep: dict[str, Any] = ep) -> tuple[np.ndarray, int]:
+                obs, info = env.reset(seed=ep["reset_seed"])
+                for action in ep["actions"][:t]:
+                    obs, _, _, _, info = env.step(action)
+                return obs, int(info["num_sorted"])
+
+            for s_index in states:
+                obs, _ = state_at(int(a["state_step"][s_index]))
+                if not np.array_equal(obs, a["obs"][s_index]):
+                    mismatches.append(f"state {s_index}: the replayed observation differs")
+                for k in np.flatnonzero(a["label_state"] == s_index):
+                    if max_labels is not None and checked >= max_labels:
+                        break
+                    _, before = state_at(int(a["state_step"][s_index]))
+                    _, _, terminated, _, info = env.step(int(a["label_action"][k]))
+                    valid = not terminated or bool(info["is_success"])
+                    got = (valid, bool(info["fell"]), int(info["num_sorted"]) - before, bool(info["is_success"]))
+                    want = (bool(a["label_valid"][k]), bool(a["label_fell"][k]), int(a["label_dsorted"][k]),
+                            bool(a["label_success"][k]))
+                    checked += 1
+                    if got != want:
+                        mismatches.append(f"label {k} (action {int(a['label_action'][k])}): stepped {got}, "
+                                          f"stored {want}")
+    finally:
+        env.close()
+    return len(a["obs"]), checked, mismatches
+
+
+def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence[int] = DEFAULT_NS,
+            model_path: str | None = "examples/pretrained/p_s.zip", episodes_per_shard: int = 2,
+            max_shards: int | None = None, explore: float = 0.3, max_probes: int = 24,
+            object_set: str = "train") -> int:
+    """Collect shards of series ``series`` into ``out`` until ``hours`` of wall clock have passed (a shard
+    under way is finished first) or ``max_shards`` exist; shards on disk are skipped, so it resumes.
+    Returns the number of shards written."""
+    if hours <= 0:
+        raise ValueError(f"hours must be > 0, got {hours}")
+    if not ns or min(ns) < 1 or max(ns) > 14:
+        raise ValueError(f"ns must be numbers of objects in 1..14, got {list(ns)}")
+    if episodes_per_shard < 1 or max_probes < 1 or not 0 <= explore <= 1:
+        raise ValueError("episodes_per_shard and max_probes must be >= 1 and explore in [0, 1]")
+    model = None
+    if model_path is not None:
+        from sb3_pixeldqn import PixelDoubleDQN
+
+        if not pathlib.Path(model_path).is_file():
+            raise ValueError(f"driving model {model_path!r} does not exist")
+        model = PixelDoubleDQN.load(model_path, device="cpu")
+    env = gym.make("ShelfSort-v0", num_objects=max(ns), object_set=object_set, primitives=PRIMITIVES,
+                   pixel_size=PIXEL_SIZE)
+    start, written, shard = time.monotonic(), 0, 0
+    try:
+        while max_shards is None or shard < max_shards:
+            path = shard_path(out, series, shard)
+            if path.exists():
+                shard += 1
+                continue
+            if time.monotonic() - start > hours * 3600:
+                break
+            t0, episodes, metas = time.monotonic(), [], []
+            for e in range(episodes_per_shard):
+                seed = scene_seed(series, shard, e)
+                rng = np.random.default_rng(seed)
+                n = int(ns[int(rng.integers(len(ns)))])
+                env.unwrapped.set_num_objects(n)  # type: ignore[attr-defined]
+                ep = collect_episode(env, model, seed, rng, explore, max_probes)
+                episodes.append(ep)
+                metas.append({"reset_seed": seed, "num_objects": n, "actions": ep.actions})
+            meta = {"format": FORMAT, "dynamics_version": DYNAMICS_VERSION, "layout": layout(env),
+                    "object_set": object_set, "teacher": "h-d-lookahead", "model": model_path, "explore": explore,
+                    "max_probes": max_probes, "series": series, "shard": shard, "episodes": metas,
+                    "seconds": round(time.monotonic() - t0, 1), "machine": f"{platform.machine()}, "
+                    f"{os.cpu_count()} CPUs", "collected": time.strftime("%Y-%m-%d")}
+            write_atomically(path, functools.partial(save_shard, meta=meta, episodes=episodes,
+                                                     obs_shape=layout(env)["obs_shape"]))
+            written += 1
+            states, labels = sum(len(ep.obs) for ep in episodes), sum(len(ep.labels["label_action"])
+                                                                        for ep in episodes)
+            print(f"{path.name}: N={[m['num_objects'] for m in metas]}, {states} states, {labels} labels, "
+                  f"{meta['seconds']:.0f} s", flush=True)
+            shard += 1
+    finally:
+        env.close()
+    return written
+
+
+def _collect_worker(kwargs: dict[str, Any]) -> int:
+    import torch
+
+    torch.set_num_threads(1)
+    return collect(**kwargs)
+
+
+def status(folder: pathlib.Path) -> str:
+    """What the dataset holds: states, labels and scenes per N, label outcomes, and the collection's throughput."""
+    shards = load_dataset(folder)
+    per_n: dict[int, list[int]] = {}
+    seconds = 0.0
+    for s in shards:
+        seconds += float(s.meta["seconds"])
+        episode_n = np.array([e["num_objects"] for e in s.meta["episodes"]])
+        n_of_state = episode_n[s.arrays["state_episode"]]
+        n_of_label = n_of_state[s.arrays["label_state"]]
+        for n in np.unique(episode_n):
+            row = per_n.setdefault(int(n), [0, 0, 0, 0])
+            row[0] += int((episode_n == n).sum())
+            row[1] += int((n_of_state == n).sum())
+            row[2] += int((n_of_label == n).sum())
+            row[3] += int((~s.arrays["label_valid"][n_of_label == n]).sum())
+    states = sum(s.num_states for s in shards)
+    labels = sum(s.num_labels for s in shards)
+    lines = [f"dataset {folder}: {len(shards)} shards, {sum(r[0] for r in per_n.values())} scenes, {states} states, "
+             f"{labels} labels ({labels / max(states, 1):.1f} per state), "
+             f"{sum(r[3] for r in per_n.values()) / max(labels, 1):.1%} of labels invalid",
+             f"collection: {seconds / 3600:.2f} h of worker time, {states / max(seconds, 1e-9) * 3600:.0f} states "
+             f"and {labels / max(seconds, 1e-9) * 3600:.0f} labels per worker-hour",
+             "| N | scenes | states | labels | invalid labels |", "|---|---|---|---|---|"]
+    lines += [f"| {n} | {r[0]} | {r[1]} | {r[2]} | {r[3] / max(r[2], 1):.1%} |" for n, r in sorted(per_n.items())]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m shelf_env.privileged.dataset", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    c = sub.add_parser("collect", help="collect shards until a wall-clock budget is spent (resumable)")
+    c.add_argument("--out", type=pathlib.Path, default=pathlib.Path("data/teacher"), help="the dataset folder")
+    c.add_argument("--hours", type=float, default=1.0, help="wall-clock budget; a shard under way is finished")
+    c.add_argument("--workers", type=int, default=1, help="processes, each with its own shard series (16 on a "
+                   "16-core machine)")
+    c.add_argument("--series", type=int, default=0, help="first shard series (worker k uses series + k)")
+    c.add_argument("--ns", type=int, nargs="+", default=list(DEFAULT_NS), help="numbers of objects to draw from")
+    c.add_argument("--model", default="examples/pretrained/p_s.zip", help="driving model whose greedy action is "
+                   "labelled first ('none' for the teacher alone)")
+    c.add_argument("--episodes-per-shard", type=int, default=2, help="whole episodes per shard file")
+    c.add_argument("--max-shards", type=int, default=None, help="stop once each series holds this many shards")
+    c.add_argument("--max-probes", type=int, default=24, help="most labelled actions per state")
+    s = sub.add_parser("status", help="print what the dataset holds")
+    s.add_argument("folder", type=pathlib.Path, nargs="?", default=pathlib.Path("data/teacher"),
+                   help="the dataset folder")
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "status":
+            print(status(args.folder))
+            return 0
+        if args.workers < 1:
+            raise ValueError(f"--workers must be >= 1, got {args.workers}")
+        jobs = [{"out": args.out, "series": args.series + k, "hours": args.hours, "ns": tuple(args.ns),
+                 "model_path": None if args.model == "none" else args.model,
+                 "episodes_per_shard": args.episodes_per_shard, "max_shards": args.max_shards,
+                 "max_probes": args.max_probes} for k in range(args.workers)]
+        if args.workers == 1:
+            written = [_collect_worker(jobs[0])]
+        else:
+            with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
+                written = pool.map(_collect_worker, jobs)
+        print(f"wrote {sum(written)} shards into {args.out}")
+    except ValueError as err:
+        print(f"dataset: error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
