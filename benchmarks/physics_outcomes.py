@@ -30,8 +30,8 @@ import gymnasium as gym
 import numpy as np
 
 import shelf_env  # noqa: F401
-from sb3_pixeldqn.files import write_json_atomically
 from shelf_env.evaluation.protocol import make_policy, run_episode, scene_seed
+from shelf_env.files import write_json_atomically
 from shelf_env.world import cabinet as world
 from shelf_env.world.cabinet import Physics
 

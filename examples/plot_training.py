@@ -25,7 +25,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from sb3_pixeldqn.files import write_atomically  # noqa: E402
+from shelf_env.files import write_atomically  # noqa: E402
 
 
 def read_episodes(path: pathlib.Path) -> dict[str, np.ndarray]:

@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from sb3_pixeldqn.files import write_atomically, write_json_atomically, write_text_atomically
 from shelf_env.cli import train
 from shelf_env.evaluation import protocol as ev
+from shelf_env.files import write_atomically, write_json_atomically, write_text_atomically
 from shelf_env.training.config import PRESETS
 
 HELDOUT_SEED = ev.HELDOUT_SEED

@@ -17,8 +17,8 @@ import argparse
 import pathlib
 from concurrent.futures import ProcessPoolExecutor
 
-from sb3_pixeldqn.files import write_json_atomically
 from shelf_env.evaluation import protocol as ev
+from shelf_env.files import write_json_atomically
 
 N = 3
 

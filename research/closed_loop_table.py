@@ -20,8 +20,8 @@ import pathlib
 import sys
 from collections import Counter
 
-from sb3_pixeldqn.files import write_text_atomically
 from shelf_env.evaluation import protocol as ev
+from shelf_env.files import write_text_atomically
 
 
 def main(argv: list[str] | None = None) -> int:

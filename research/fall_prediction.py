@@ -25,9 +25,9 @@ import gymnasium as gym
 import torch as th
 
 from sb3_pixeldqn import PixelDoubleDQN
-from sb3_pixeldqn.files import write_text_atomically
 from shelf_env import params
 from shelf_env.evaluation.protocol import scene_seed
+from shelf_env.files import write_text_atomically
 from shelf_env.privileged.lookahead import LookaheadDistance, probe_step
 
 HELD_OUT_SEED = 5  # scene_seed's seed index: the evaluations use 0..2, training its own RNG

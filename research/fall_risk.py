@@ -53,10 +53,10 @@ import numpy as np
 import torch as th
 import torch.nn.functional as F
 
-from sb3_pixeldqn.files import write_atomically, write_json_atomically
 from sb3_pixeldqn.networks import DEFAULT_WIDTHS, ResidualFCN
 from shelf_env import params, policies
 from shelf_env.baselines.heuristics import ObservationView
+from shelf_env.files import write_atomically, write_json_atomically
 from shelf_env.privileged.lookahead import LookaheadDistance, probe_step
 from shelf_env.symmetry import PermuteClasses
 

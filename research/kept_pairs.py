@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from sb3_pixeldqn import PixelDoubleDQN
-from sb3_pixeldqn.files import write_text_atomically
+from shelf_env.files import write_text_atomically
 
 
 def kept_pairs(buffer_path: pathlib.Path, run_checkpoint: pathlib.Path) -> tuple[Any, np.ndarray, int]:

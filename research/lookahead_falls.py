@@ -9,8 +9,8 @@ import argparse
 import pathlib
 import sys
 
-from sb3_pixeldqn.files import write_atomically
 from shelf_env.evaluation.protocol import EpisodeRecord, load_cells
+from shelf_env.files import write_atomically
 
 
 def invalid_step_table(records: list[EpisodeRecord]) -> str:

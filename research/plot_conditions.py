@@ -17,7 +17,7 @@ import argparse
 import csv
 import pathlib
 
-from sb3_pixeldqn.files import write_atomically
+from shelf_env.files import write_atomically
 
 METRICS = {"sr": ("sr_mean", "SR (%)"), "fell_rate": ("fell_rate", "episodes with a fall"),
            "ae": ("ae_mean", "AE"), "loop_rate": ("loop_rate", "episodes that loop")}

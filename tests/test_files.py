@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from sb3_pixeldqn.files import write_atomically, write_json_atomically, write_text_atomically
+from shelf_env.files import write_atomically, write_json_atomically, write_text_atomically
 
 
 def test_writes_creates_parents_and_leaves_no_partial(tmp_path):

@@ -25,11 +25,11 @@ import cv2
 import gymnasium as gym
 import numpy as np
 
-from sb3_pixeldqn.files import write_atomically
 from sb3_pixeldqn.loop_breaker import LoopBreaker
 from shelf_env import params
 from shelf_env.actions import ActionCodec
 from shelf_env.evaluation import protocol as ev
+from shelf_env.files import write_atomically
 
 #: The policy shelf-demo shows by default: the shipped P+S model, else the best committed checkpoint.
 DEFAULT_POLICIES = ("examples/pretrained/p_s.zip", "results/learning/recipe_n3.zip")

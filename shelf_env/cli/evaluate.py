@@ -45,9 +45,9 @@ from typing import Any
 
 from tqdm import tqdm
 
-from sb3_pixeldqn.files import copy_atomically, write_json_atomically
 from shelf_env import policies
 from shelf_env.evaluation import protocol as ev
+from shelf_env.files import copy_atomically, write_json_atomically
 
 #: A cell: (policy, N, seed, object set).
 Job = tuple[str, int, int, str]

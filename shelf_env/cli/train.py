@@ -54,7 +54,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import HindsightRelabelReplayBuffer, PixelDoubleDQN
 from sb3_pixeldqn.callbacks import curriculum_over
-from sb3_pixeldqn.files import copy_atomically, write_json_atomically, write_text_atomically
+from shelf_env.files import copy_atomically, write_json_atomically, write_text_atomically
 from shelf_env.training.config import (
     PRESETS,
     TrainConfig,

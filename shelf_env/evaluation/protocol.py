@@ -29,9 +29,9 @@ import gymnasium as gym
 import numpy as np
 
 from sb3_pixeldqn.buffers import unchanged
-from sb3_pixeldqn.files import write_atomically, write_json_atomically
 from sb3_pixeldqn.loop_breaker import predict_takes
 from shelf_env import params
+from shelf_env.files import write_atomically, write_json_atomically
 from shelf_env.policies import (  # noqa: F401  (re-exported: the evaluation's names for policies)
     LOOP_BREAKER,
     POLICIES,

@@ -25,8 +25,8 @@ import pathlib
 import sys
 from collections.abc import Sequence
 
-from sb3_pixeldqn.files import write_atomically
 from shelf_env.evaluation.protocol import FAILURES
+from shelf_env.files import write_atomically
 
 #: The SR margin (points, averaged over N) the learned policy must have over the best heuristic.
 TARGET_MARGIN = 30.0

@@ -34,8 +34,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from sb3_pixeldqn.files import write_atomically
 from shelf_env.evaluation import protocol as ev
+from shelf_env.files import write_atomically
 
 #: The phases a fall is attributed to, in the order they happen within an action.
 PHASES = ("pick", "place", "push", "settle")

@@ -52,9 +52,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from sb3_pixeldqn.files import write_atomically
 from shelf_env.baselines.heuristics import ObservationView
 from shelf_env.env import DYNAMICS_VERSION
+from shelf_env.files import write_atomically
 from shelf_env.policies import masked_greedy
 from shelf_env.privileged.lookahead import LookaheadDistance, Outcome, probe_step
 

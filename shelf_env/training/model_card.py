@@ -22,7 +22,7 @@ import math
 import pathlib
 from typing import Any
 
-from sb3_pixeldqn.files import write_text_atomically
+from shelf_env.files import write_text_atomically
 
 
 def stage_times(run: pathlib.Path, history: list[list[int]]) -> list[tuple[int, int, float | None]]:

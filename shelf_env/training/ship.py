@@ -21,8 +21,8 @@ import json
 import pathlib
 
 from sb3_pixeldqn import PixelDoubleDQN
-from sb3_pixeldqn.files import copy_atomically, write_text_atomically
 from shelf_env.evaluation.protocol import checkpoint_primitives
+from shelf_env.files import copy_atomically, write_text_atomically
 from shelf_env.training.config import PRESETS
 from shelf_env.training.model_card import model_cards
 
