@@ -2,8 +2,8 @@
 complete new one.
 
 Checkpoints and replay buffers are written by long jobs that may be killed at any moment (the
-machine goes, the session ends); an env's tools can write through it too (``shelf_env.files``). Each is written to a hidden
-``.<name>.partial`` file beside the target and moved over it with `os.replace`, which is atomic
+machine goes, the session ends); an env's own tools can write through it too. Each is written to a
+hidden ``.<name>.partial`` file beside the target and moved over it with `os.replace`, which is atomic
 on POSIX and Windows; a failed write leaves no partial file behind.
 """
 

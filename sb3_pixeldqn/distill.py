@@ -1,0 +1,171 @@
+"""Distillation: a supervised loss on every labelled pixel of a state, for `FCNPolicy`'s Q-maps.
+
+Reinforcement learning gives a Q-map one pixel of gradient per transition (Eq. 3). A teacher that
+can try many actions from one state (in simulation, where a state can be copied) says much more:
+which of those actions end the episode and with what value, and which one it would take. This
+module trains the online Q-network on such labelled states; the algorithm and the network stay
+the paper's, and `PixelDoubleDQN.learn` can fine-tune the result as usual.
+
+A labelled state (`LabelledStates`): an observation and any number of labelled actions, each with
+
+- ``invalid``: the action ends the episode invalid (in a shelf: an object falls out);
+- ``value``: its exact value where the action ends the episode (the invalid reward, or the reward of
+  reaching the goal), NaN where the label does not know it;
+
+and, optionally, the teacher's action in that state (one of its labelled actions). The loss of a
+batch of states is the sum of three terms, each over every labelled pixel:
+
+- **value**: Huber(Q(s, a), value) on the labels with a known value;
+- **ranking**: every action that kept the episode valid is valued at least ``margin`` above every
+  action that ended it invalid, in the same state: mean relu(Q(s, a_inv) + margin − Q(s, a_ok));
+- **teacher**: the large-margin loss of demonstrations on the teacher's action, over the labelled
+  actions: max_a [Q(s, a) + margin·(a ≠ a_T)] − Q(s, a_T).
+
+It knows nothing of shelves: actions are flat indices of the policy's maps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch as th
+import torch.nn.functional as F
+
+
+@dataclass
+class LabelledStates:
+    """States and their labelled actions (see the module docstring); ``label_state`` indexes ``obs``."""
+
+    obs: np.ndarray  # (S, C, H, W) uint8
+    label_state: np.ndarray  # (K,) int
+    label_action: np.ndarray  # (K,) int, flat action index
+    label_invalid: np.ndarray  # (K,) bool
+    label_value: np.ndarray  # (K,) float, NaN where unknown
+    teacher_action: np.ndarray  # (S,) int, -1 where none
+
+    def check(self, obs_shape: tuple[int, ...], n_actions: int) -> None:
+        """A `ValueError` naming what does not fit the policy's observation and action spaces."""
+        if self.obs.dtype != np.uint8 or tuple(self.obs.shape[1:]) != tuple(obs_shape):
+            raise ValueError(f"labelled states: observations {self.obs.dtype} {self.obs.shape[1:]}, the policy "
+                             f"takes uint8 {tuple(obs_shape)}")
+        k = len(self.label_action)
+        if not (len(self.label_state) == len(self.label_invalid) == len(self.label_value) == k):
+            raise ValueError("labelled states: per-label arrays of unequal lengths")
+        if len(self.teacher_action) != len(self.obs):
+            raise ValueError("labelled states: teacher_action needs one entry per state")
+        if k and (self.label_state.min() < 0 or self.label_state.max() >= len(self.obs)):
+            raise ValueError("labelled states: a label points outside the states")
+        if k and (self.label_action.min() < 0 or self.label_action.max() >= n_actions):
+            raise ValueError(f"labelled states: a labelled action outside [0, {n_actions})")
+        if (self.teacher_action >= n_actions).any():
+            raise ValueError(f"labelled states: a teacher action outside [0, {n_actions})")
+
+    def subset(self, states: np.ndarray) -> LabelledStates:
+        """The states ``states`` (indices) and their labels, renumbered."""
+        states = np.asarray(states, dtype=np.int64)
+        new_index = np.full(len(self.obs), -1, np.int64)
+        new_index[states] = np.arange(len(states))
+        keep = new_index[self.label_state] >= 0
+        return LabelledStates(self.obs[states], new_index[self.label_state[keep]], self.label_action[keep],
+                              self.label_invalid[keep], self.label_value[keep], self.teacher_action[states])
+
+
+def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
+                      value: th.Tensor, teacher: th.Tensor, margin: float = 1.0,
+                      weights: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> tuple[th.Tensor, dict[str, float]]:
+    """The loss of a batch (module docstring): ``q_maps`` (B, n_actions) with gradients, labels indexing
+    its rows; ``teacher`` (B,) with -1 where a state has none. Returns the loss and its terms."""
+    qa = q_maps[label_state, label_action]
+    zero = q_maps.sum() * 0.0
+    known = ~th.isnan(value)
+    value_loss = F.smooth_l1_loss(qa[known], value[known]) if known.any() else zero
+    same = label_state[:, None] == label_state[None, :]
+    pairs = same & ~invalid[:, None] & invalid[None, :]  # (valid row, invalid column) of one state
+    ranking = F.relu(qa[None, :] + margin - qa[:, None])[pairs].mean() if pairs.any() else zero
+    has_teacher = teacher[label_state] >= 0
+    teacher_loss = zero
+    if has_teacher.any():
+        is_teacher = label_action == teacher[label_state]
+        bonus = qa + margin * (~is_teacher).float()
+        rows = th.unique(label_state[has_teacher & is_teacher])
+        if len(rows):
+            member = label_state[None, :] == rows[:, None]  # (R, K)
+            best = th.where(member, bonus[None, :], th.full_like(bonus[None, :], -th.inf)).max(dim=1).values
+            q_teacher = q_maps[rows, teacher[rows]]
+            teacher_loss = (best - q_teacher).mean()
+    loss = weights[0] * value_loss + weights[1] * ranking + weights[2] * teacher_loss
+    return loss, {"value": float(value_loss.detach()), "ranking": float(ranking.detach()),
+                  "teacher": float(teacher_loss.detach())}
+
+
+def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: float,
+               weights: tuple[float, float, float]) -> tuple[th.Tensor, dict[str, float]]:
+    """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network."""
+    sub = data.subset(states)
+    device = policy.device
+    images = policy.images(th.as_tensor(sub.obs, device=device))
+    q = policy.q_net.q_maps(images).flatten(1)
+    return distillation_loss(q, th.as_tensor(sub.label_state, device=device),
+                             th.as_tensor(sub.label_action, device=device),
+                             th.as_tensor(sub.label_invalid, device=device),
+                             th.as_tensor(sub.label_value, dtype=th.float32, device=device),
+                             th.as_tensor(sub.teacher_action, device=device), margin, weights)
+
+
+def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
+             weights: tuple[float, float, float] = (1.0, 1.0, 1.0), chunk: int = 32) -> dict[str, float]:
+    """The mean loss and its terms over every state of ``data`` (no gradients), and how often the
+    network's best labelled action of a state is one that ended the episode invalid (``invalid_choice``:
+    the greedy choice among the labelled actions)."""
+    totals: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0}
+    invalid_choices = chosen = 0
+    policy.set_training_mode(False)
+    with th.no_grad():
+        for start in range(0, len(data.obs), chunk):
+            states = np.arange(start, min(start + chunk, len(data.obs)))
+            loss, parts = batch_loss(policy, data, states, margin, weights)
+            totals["loss"] += float(loss.detach()) * len(states)
+            for key, v in parts.items():
+                totals[key] += v * len(states)
+            sub = data.subset(states)
+            q = policy.q_net.q_maps(policy.images(th.as_tensor(sub.obs, device=policy.device))).flatten(1)
+            qa = q[th.as_tensor(sub.label_state), th.as_tensor(sub.label_action)].cpu().numpy()
+            for s in range(len(states)):
+                rows = np.flatnonzero(sub.label_state == s)
+                if len(rows):
+                    invalid_choices += int(sub.label_invalid[rows[int(np.argmax(qa[rows]))]])
+                    chosen += 1
+    out = {k: v / max(len(data.obs), 1) for k, v in totals.items()}
+    out["invalid_choice"] = invalid_choices / max(chosen, 1)
+    return out
+
+
+def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
+            weights: tuple[float, float, float] = (1.0, 1.0, 1.0), seed: int = 0) -> list[dict[str, float]]:
+    """Train ``model``'s online Q-network (a `PixelDoubleDQN`) on ``data`` for ``epochs`` passes with its own
+    optimiser, then copy it to the target network. Returns each epoch's mean training loss and terms."""
+    policy = model.policy
+    data.check(tuple(model.observation_space.shape), int(model.action_space.n))
+    if epochs < 1 or batch_states < 1:
+        raise ValueError(f"epochs and batch_states must be >= 1, got {epochs} and {batch_states}")
+    rng = np.random.default_rng(seed)
+    history = []
+    for _ in range(epochs):
+        policy.set_training_mode(True)
+        sums: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0}
+        order = rng.permutation(len(data.obs))
+        for start in range(0, len(order), batch_states):
+            states = order[start:start + batch_states]
+            loss, parts = batch_loss(policy, data, states, margin, weights)
+            policy.optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            policy.optimizer.step()
+            sums["loss"] += float(loss.detach()) * len(states)
+            for key, v in parts.items():
+                sums[key] += v * len(states)
+        history.append({k: v / len(order) for k, v in sums.items()})
+    model.q_net_target.load_state_dict(model.q_net.state_dict())
+    policy.set_training_mode(False)
+    return history

@@ -1,0 +1,88 @@
+"""Distillation (sb3_pixeldqn.distill): a loss on every labelled pixel lowers on a small crafted dataset and
+teaches the Q-maps which labelled actions end the episode invalid; bad data is refused by name."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch as th
+from pixel_envs import FindTheSquareEnv
+
+from sb3_pixeldqn import PixelDoubleDQN
+from sb3_pixeldqn.distill import LabelledStates, distill, distillation_loss, evaluate
+
+
+def crafted(n_states: int = 24, seed: int = 0) -> tuple[PixelDoubleDQN, LabelledStates]:
+    """FindTheSquare scenes: acting on the square is the teacher's (valid) choice; cells six columns beside the
+    square 'drop an object' (invalid, value -10); far cells are valid with unknown value."""
+    env = FindTheSquareEnv(shape=(4, 12, 20), n_maps=1)
+    model = PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0)], widths=(4, 8, 8)), seed=0,
+                           learning_rate=3e-3)
+    rng = np.random.default_rng(seed)
+    obs, label_state, label_action, invalid, value, teacher = [], [], [], [], [], []
+    for s in range(n_states):
+        o, _ = env.reset(seed=int(rng.integers(1 << 30)))
+        r, c = env._centre
+        obs.append(o)
+        teacher.append(r * 20 + c)
+        labels = [(r * 20 + c, False, np.nan)]  # the teacher's: on the square
+        for dc in (-6, 6):  # six columns left and right of the square: invalid
+            if 0 <= c + dc < 20:
+                labels.append((r * 20 + c + dc, True, -10.0))
+        far = int(rng.integers(240))
+        if abs(far // 20 - r) > 3:
+            labels.append((far, False, np.nan))
+        for a, bad, v in labels:
+            label_state.append(s)
+            label_action.append(a)
+            invalid.append(bad)
+            value.append(v)
+    data = LabelledStates(np.stack(obs), np.array(label_state), np.array(label_action), np.array(invalid),
+                          np.array(value, np.float32), np.array(teacher))
+    return model, data
+
+
+def test_distillation_lowers_the_loss_and_ranks_invalid_actions_below_valid_ones() -> None:
+    th.manual_seed(0)
+    model, data = crafted()
+    train, held_out = data.subset(np.arange(16)), data.subset(np.arange(16, 24))
+    before, before_held = evaluate(model.policy, train), evaluate(model.policy, held_out)
+    history = distill(model, train, epochs=120, batch_states=8)
+    after, after_held = evaluate(model.policy, train), evaluate(model.policy, held_out)
+    assert history[-1]["loss"] < history[0]["loss"]
+    assert after["loss"] < 0.5 * before["loss"]
+    assert after["value"] < before["value"] and after["ranking"] < before["ranking"]
+    # the best labelled action of (nearly) every training state is now a valid one
+    assert after["invalid_choice"] <= 0.125 < before["invalid_choice"]
+    assert after_held["loss"] < before_held["loss"]  # and it generalises to scenes it never saw
+    for p, q in zip(model.q_net.parameters(), model.q_net_target.parameters()):  # the target follows
+        assert th.equal(p, q)
+
+
+def test_the_loss_terms_are_what_the_docstring_says() -> None:
+    q = th.tensor([[0.0, -2.0, 1.0, 5.0]], requires_grad=True)  # one state, four actions
+    state = th.tensor([0, 0, 0])
+    action = th.tensor([0, 1, 2])
+    invalid = th.tensor([False, True, False])
+    value = th.tensor([float("nan"), -10.0, float("nan")])
+    loss, parts = distillation_loss(q, state, action, invalid, value, th.tensor([0]), margin=1.0)
+    assert parts["value"] == pytest.approx(7.5)  # Huber(-2, -10) with delta 1
+    # valid 0 vs invalid -2: relu(-2 + 1 - 0) = 0; valid 1 vs invalid -2: 0
+    assert parts["ranking"] == 0.0
+    # teacher 0 over the labelled actions 0, 1, 2: max(0, -2 + 1, 1 + 1) - 0 = 2 (action 3 is not labelled)
+    assert parts["teacher"] == pytest.approx(2.0)
+    loss.backward()
+    assert q.grad is not None and q.grad[0, 3] == 0.0  # unlabelled pixels get no gradient
+
+
+def test_bad_labelled_states_are_refused_by_name() -> None:
+    model, data = crafted(4)
+    with pytest.raises(ValueError, match="labelled action outside"):
+        distill(model, LabelledStates(data.obs, data.label_state, data.label_action + 10_000, data.label_invalid,
+                                      data.label_value, data.teacher_action))
+    with pytest.raises(ValueError, match="observations uint8 \\(4, 6, 20\\)"):
+        distill(model, LabelledStates(data.obs[:, :, :6], data.label_state, data.label_action, data.label_invalid,
+                                      data.label_value, data.teacher_action))
+    with pytest.raises(ValueError, match="outside the states"):
+        distill(model, LabelledStates(data.obs[:1], data.label_state, data.label_action, data.label_invalid,
+                                      data.label_value, data.teacher_action[:1]))
