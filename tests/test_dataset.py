@@ -111,3 +111,27 @@ def test_bad_collect_arguments_are_one_line_errors(capsys: pytest.CaptureFixture
     assert dataset.main(["collect", "--out", str(tmp_path), "--model", str(tmp_path / "missing.zip")]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(one_shard: pathlib.Path,
+                                                                           tmp_path: pathlib.Path) -> None:
+    from shelf_env.training import distill as distill_cli
+
+    shard = dataset.load_shard(dataset.shard_path(one_shard, 0, 0))
+    labelled = dataset.labelled_states([shard])
+    a = shard.arrays
+    assert len(labelled.obs) == shard.num_states and len(labelled.label_action) == shard.num_labels
+    assert np.all(labelled.label_value[~a["label_valid"]] == -10.0)
+    assert np.all(labelled.label_value[a["label_success"]] == 0.0)
+    assert np.isnan(labelled.label_value[a["label_valid"] & ~a["label_success"]]).all()
+    out = tmp_path / "distilled.zip"
+    assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(out), "--epochs", "1",
+                             "--val-fraction", "0"]) == 0
+    report = json.loads(out.with_suffix(".distill.json").read_text())
+    assert report["train_states"] == shard.num_states and report["history"][0]["train"]["loss"] > 0
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    assert PixelDoubleDQN.load(out).observation_space.shape == (4, 40, 60)
+    assert distill_cli.main(["--data", str(one_shard), "--init", str(tmp_path / "none.zip"), "--out",
+                             str(tmp_path / "x.zip")]) == 2
+    assert not (tmp_path / "x.zip").exists()

@@ -52,6 +52,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from sb3_pixeldqn.distill import LabelledStates
+from shelf_env import params
 from shelf_env.baselines.heuristics import ObservationView
 from shelf_env.env import DYNAMICS_VERSION
 from shelf_env.files import write_atomically
@@ -300,6 +302,25 @@ def replay_states(shard: Shard, max_labels: int | None = None) -> tuple[int, int
     finally:
         env.close()
     return len(a["obs"]), checked, mismatches
+
+
+def labelled_states(shards: Sequence[Shard], invalid_reward: float = params.REWARD_INVALID) -> LabelledStates:
+    """The shards' states and labels in `sb3_pixeldqn.distill`'s form: an action that ended the episode
+    invalid has the value ``invalid_reward``, one that sorted the scene ``params.REWARD_SORTED`` (both
+    terminal, exact), any other an unknown value (NaN); the teacher's choice is the teacher action."""
+    parts = []
+    offset = 0
+    for shard in shards:
+        a = shard.arrays
+        value = np.full(len(a["label_action"]), np.nan, np.float32)
+        value[~a["label_valid"]] = invalid_reward
+        value[a["label_success"]] = params.REWARD_SORTED
+        parts.append((a["obs"], a["label_state"] + offset, a["label_action"], ~a["label_valid"], value,
+                      a["teacher_action"]))
+        offset += len(a["obs"])
+    if not parts:
+        raise ValueError("no shards to take labelled states from")
+    return LabelledStates(*(np.concatenate([p[i] for p in parts]) for i in range(6)))
 
 
 def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence[int] = DEFAULT_NS,

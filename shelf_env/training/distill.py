@@ -1,0 +1,114 @@
+"""Distil the teacher dataset into a P+S model's Q-maps (`sb3_pixeldqn.distill`), then fine-tune as usual.
+
+    python -m shelf_env.training.distill --data data/teacher --init examples/pretrained/p_s.zip \\
+        --out runs/distilled.zip --epochs 10 [--max-states 10000]
+
+The dataset's scenes are split by scene (every state of a held-out scene is held out): the last
+``--val-fraction`` of its scenes, in shard order, are validation. Each epoch reports the training
+loss and, on the validation states, the loss and ``invalid_choice``: how often the model's best
+labelled action of a state is one that ended the episode invalid (the driving model's greedy
+action is labelled in every state, so this includes its choice). ``--max-states`` takes the first
+states of the training scenes only, for a scaling curve. The model is saved atomically (an SB3 zip
+that `PixelDoubleDQN.load` and ``shelf-train --init-from`` take); the report goes beside it as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from sb3_pixeldqn.distill import LabelledStates, distill, evaluate
+from shelf_env.files import write_json_atomically
+from shelf_env.privileged import dataset
+
+
+def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[list[int], list[int]]:
+    """State indices (over the shards in order) of the training and validation scenes."""
+    scene_of_state: list[int] = []
+    scene = 0
+    for shard in shards:
+        episodes = shard.arrays["state_episode"]
+        scene_of_state += [scene + int(e) for e in episodes]
+        scene += len(shard.meta["episodes"])
+    n_val = int(round(scene * val_fraction))
+    if scene - n_val < 1:
+        raise ValueError(f"{scene} scenes leave none for training at val_fraction {val_fraction}")
+    first_val = scene - n_val
+    train = [i for i, s in enumerate(scene_of_state) if s < first_val]
+    val = [i for i, s in enumerate(scene_of_state) if s >= first_val]
+    return train, val
+
+
+def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
+        max_states: int | None = None, batch_states: int = 16, margin: float = 1.0,
+        learning_rate: float | None = None, seed: int = 0) -> dict[str, Any]:
+    """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report."""
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    if epochs < 1 or not 0 <= val_fraction < 1:
+        raise ValueError(f"need epochs >= 1 and val_fraction in [0, 1), got {epochs} and {val_fraction}")
+    if not pathlib.Path(init).is_file():
+        raise ValueError(f"--init {init!r} does not exist")
+    model = PixelDoubleDQN.load(init, device="cpu")
+    if learning_rate is not None:
+        for group in model.policy.optimizer.param_groups:
+            group["lr"] = learning_rate
+    shards = dataset.load_dataset(data)
+    stored = shards[0].meta["layout"]
+    if list(stored["obs_shape"]) != list(model.observation_space.shape) or \
+            len(stored["map_names"]) != model.policy.n_maps:
+        raise ValueError(f"{init} takes observations {list(model.observation_space.shape)} and {model.policy.n_maps} "
+                         f"maps; the dataset's are {stored['obs_shape']} and {stored['map_names']}")
+    labelled = dataset.labelled_states(shards)
+    train_idx, val_idx = split_by_scene(shards, val_fraction)
+    if max_states is not None:
+        train_idx = train_idx[:max_states]
+    train: LabelledStates = labelled.subset(np.array(train_idx))
+    val = labelled.subset(np.array(val_idx)) if val_idx else None
+    start = time.monotonic()
+    history = []
+    for epoch in range(epochs):
+        row: dict[str, Any] = {"epoch": epoch + 1, "train": distill(model, train, 1, batch_states, margin,
+                                                                     seed=seed + epoch)[0]}
+        if val is not None:
+            row["val"] = evaluate(model.policy, val, margin)
+        history.append(row)
+        print(json.dumps(row), flush=True)
+    model.save(out)
+    report = {"data": str(data), "init": init, "out": str(out), "train_states": len(train.obs),
+              "train_labels": len(train.label_action), "val_states": 0 if val is None else len(val.obs),
+              "epochs": epochs, "seconds": round(time.monotonic() - start, 1), "history": history}
+    write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
+    return report
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m shelf_env.training.distill", description=__doc__.split("\n")[0])
+    p.add_argument("--data", type=pathlib.Path, default=pathlib.Path("data/teacher"), help="the dataset folder")
+    p.add_argument("--init", default="examples/pretrained/p_s.zip", help="the P+S zip whose Q-maps are trained")
+    p.add_argument("--out", type=pathlib.Path, required=True, help="the distilled model (an SB3 zip)")
+    p.add_argument("--epochs", type=int, default=10, help="passes over the training states")
+    p.add_argument("--val-fraction", type=float, default=0.2, help="share of the scenes held out for validation")
+    p.add_argument("--max-states", type=int, default=None, help="train on the first this many states only")
+    p.add_argument("--batch-states", type=int, default=16, help="states per gradient step (all their labels)")
+    p.add_argument("--margin", type=float, default=1.0, help="the ranking and teacher losses' margin")
+    p.add_argument("--learning-rate", type=float, default=None, help="the optimiser's rate (default: the model's)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the batch order")
+    args = p.parse_args(argv)
+    try:
+        run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
+            args.margin, args.learning_rate, args.seed)
+    except ValueError as err:
+        print(f"distill: error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
