@@ -1,7 +1,7 @@
 """Policies by name: the registry that evaluations, the demo and the CLI build every policy from.
 
 A policy is named by a string: a registered name (`register_policy`: ``"h-d"``, ``"h-a"``,
-``"random"``, the privileged ``"h-d-lookahead"`` and ``"h-a-lookahead"``) or the path of a
+``"random"``, the privileged ``"h-d-lookahead"``, ``"h-a-lookahead"`` and ``"h-d-planner"``) or the path of a
 `PixelDoubleDQN` zip (P+S or S; the env layout follows the checkpoint), followed by any registered
 wrappers (`register_wrapper`), innermost first: ``"examples/pretrained/p_s.zip+loop-breaker"``
 plays the checkpoint under `sb3_pixeldqn.LoopBreaker`. A wrapper changes what the policy does, so
@@ -27,6 +27,7 @@ from sb3_pixeldqn.loop_breaker import LoopBreaker
 from shelf_env import params
 from shelf_env.baselines.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
 from shelf_env.privileged.lookahead import LookaheadAccessibility, LookaheadDistance
+from shelf_env.privileged.planning import PlanningTeacher
 
 #: A registered policy: ``factory(env, seed)`` -> an object with SB3's ``predict``.
 PolicyFactory = Callable[[gym.Env, int], Any]
@@ -199,5 +200,6 @@ register_policy("h-a", lambda env, seed: AccessibilityHeuristic(env))
 # privileged diagnostics (they read the simulator), not baselines: shelf_env.privileged.lookahead
 register_policy("h-d-lookahead", lambda env, seed: LookaheadDistance(env))
 register_policy("h-a-lookahead", lambda env, seed: LookaheadAccessibility(env))
+register_policy("h-d-planner", lambda env, seed: PlanningTeacher(env))
 register_policy("random", lambda env, seed: RandomPolicy(env, seed=seed))
 register_wrapper(LOOP_BREAKER, lambda agent, env, base: LoopBreaker(agent))

@@ -9,12 +9,15 @@ without repeats (at most ``max_probes``; past that only the teacher's and the gr
 teacher's own probes (its chosen action among them), the driving model's greedy masked action, one
 random graspable cell of every visible object, the teacher's push candidates, random masked actions.
 
-The teacher is privileged (it reads the simulator): today the one-step lookahead on H-d
-(``h-d-lookahead``, `shelf_env.privileged.lookahead.LookaheadDistance`), which has no value estimate
-(``teacher_value`` is NaN). The executed action is the teacher's choice, or, with probability
-``explore``, the model's greedy action when its probe kept the scene valid, so the states cover
-where the learner goes too. An episode stops at its end (sorted, invalid, 40 actions) or when no
-probed action keeps the scene valid.
+The teacher is privileged (it reads the simulator): the one-step lookahead on H-d
+(``h-d-lookahead``, `shelf_env.privileged.lookahead.LookaheadDistance`, the default: cheap, no value
+estimate, so ``teacher_value`` is NaN) or the planning teacher (``h-d-planner``,
+`shelf_env.privileged.planning.PlanningTeacher`: rollouts of the lookahead from each safe
+candidate, about ten times the cost per state, with its best rollout's score as ``teacher_value``).
+The executed action is the teacher's choice, or, with probability ``explore``, the model's greedy
+action when its probe kept the scene valid, so the states cover where the learner goes too. An
+episode stops at its end (sorted, invalid, 40 actions) or when no probed action keeps the scene
+valid.
 
 Storage (one compressed ``.npz`` per shard, a shard = ``episodes_per_shard`` whole episodes,
 written atomically, so a collection killed mid-shard leaves no partial shard): ``meta`` (JSON: the
@@ -58,7 +61,8 @@ from shelf_env.baselines.heuristics import ObservationView
 from shelf_env.env import DYNAMICS_VERSION
 from shelf_env.files import write_atomically
 from shelf_env.policies import masked_greedy
-from shelf_env.privileged.lookahead import LookaheadDistance, Outcome, probe_step
+from shelf_env.privileged.lookahead import LookaheadDistance, LookaheadHeuristic, Outcome, probe_step
+from shelf_env.privileged.planning import PlanningTeacher
 
 #: Version of the shard layout below; a shard of another is refused.
 FORMAT = 1
@@ -101,7 +105,7 @@ class Episode:
         self.actions: list[int] = []
 
 
-def probe_actions(env: gym.Env, teacher: LookaheadDistance, view: ObservationView, greedy: int | None,
+def probe_actions(env: gym.Env, teacher: LookaheadHeuristic, view: ObservationView, greedy: int | None,
                   rng: np.random.Generator, max_probes: int) -> list[tuple[int, int]]:
     """``(action, source)`` to label beyond the teacher's own probes, in order (see the module docstring)."""
     codec = teacher.codec
@@ -120,13 +124,23 @@ def probe_actions(env: gym.Env, teacher: LookaheadDistance, view: ObservationVie
     return out[:max_probes]
 
 
+#: The teachers a collection may use (``--teacher``).
+TEACHERS = ("h-d-lookahead", "h-d-planner")
+
+
+def make_teacher(name: str, env: gym.Env) -> LookaheadHeuristic:
+    if name not in TEACHERS:
+        raise ValueError(f"unknown teacher {name!r}; known: {list(TEACHERS)}")
+    return LookaheadDistance(env) if name == "h-d-lookahead" else PlanningTeacher(env)
+
+
 def collect_episode(env: gym.Env, model: Any, seed: int, rng: np.random.Generator, explore: float = 0.3,
-                    max_probes: int = 24) -> Episode:
+                    max_probes: int = 24, teacher_name: str = "h-d-lookahead") -> Episode:
     """Play the scene of ``seed`` with the teacher and label every visited state (module docstring).
     ``model``: anything with SB3's ``predict(obs, deterministic, action_masks)``, whose greedy action is
     labelled first and sometimes executed; None for the teacher alone."""
     base: Any = env.unwrapped
-    teacher = LookaheadDistance(env)
+    teacher = make_teacher(teacher_name, env)
     episode = Episode()
     obs, info = env.reset(seed=seed)
     sorted_now = int(info["num_sorted"])
@@ -164,7 +178,9 @@ def collect_episode(env: gym.Env, model: Any, seed: int, rng: np.random.Generato
             executed = greedy
         elif choice not in valid:
             executed = valid[int(rng.integers(len(valid)))] if valid else -1
-        for key, value in zip(STATE_KEYS, (0, step, choice, np.nan, executed)):
+        teacher_value = getattr(teacher, "value", None)
+        row = (0, step, choice, np.nan if teacher_value is None else teacher_value, executed)
+        for key, value in zip(STATE_KEYS, row):
             episode.states[key].append(value)
         if executed < 0:
             break  # nothing probed keeps the scene valid: no state after this one to show
@@ -326,7 +342,7 @@ def labelled_states(shards: Sequence[Shard], invalid_reward: float = params.REWA
 def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence[int] = DEFAULT_NS,
             model_path: str | None = "examples/pretrained/p_s.zip", episodes_per_shard: int = 2,
             max_shards: int | None = None, explore: float = 0.3, max_probes: int = 24,
-            object_set: str = "train") -> int:
+            object_set: str = "train", teacher: str = "h-d-lookahead") -> int:
     """Collect shards of series ``series`` into ``out`` until ``hours`` of wall clock have passed (a shard
     under way is finished first) or ``max_shards`` exist; shards on disk are skipped, so it resumes.
     Returns the number of shards written."""
@@ -334,6 +350,8 @@ def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence
         raise ValueError(f"hours must be > 0, got {hours}")
     if not ns or min(ns) < 1 or max(ns) > 14:
         raise ValueError(f"ns must be numbers of objects in 1..14, got {list(ns)}")
+    if teacher not in TEACHERS:
+        raise ValueError(f"unknown teacher {teacher!r}; known: {list(TEACHERS)}")
     if episodes_per_shard < 1 or max_probes < 1 or not 0 <= explore <= 1:
         raise ValueError("episodes_per_shard and max_probes must be >= 1 and explore in [0, 1]")
     model = None
@@ -360,11 +378,11 @@ def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence
                 rng = np.random.default_rng(seed)
                 n = int(ns[int(rng.integers(len(ns)))])
                 env.unwrapped.set_num_objects(n)  # type: ignore[attr-defined]
-                ep = collect_episode(env, model, seed, rng, explore, max_probes)
+                ep = collect_episode(env, model, seed, rng, explore, max_probes, teacher)
                 episodes.append(ep)
                 metas.append({"reset_seed": seed, "num_objects": n, "actions": ep.actions})
             meta = {"format": FORMAT, "dynamics_version": DYNAMICS_VERSION, "layout": layout(env),
-                    "object_set": object_set, "teacher": "h-d-lookahead", "model": model_path, "explore": explore,
+                    "object_set": object_set, "teacher": teacher, "model": model_path, "explore": explore,
                     "max_probes": max_probes, "series": series, "shard": shard, "episodes": metas,
                     "seconds": round(time.monotonic() - t0, 1), "machine": f"{platform.machine()}, "
                     f"{os.cpu_count()} CPUs", "collected": time.strftime("%Y-%m-%d")}
@@ -431,6 +449,8 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--episodes-per-shard", type=int, default=2, help="whole episodes per shard file")
     c.add_argument("--max-shards", type=int, default=None, help="stop once each series holds this many shards")
     c.add_argument("--max-probes", type=int, default=24, help="most labelled actions per state")
+    c.add_argument("--teacher", choices=TEACHERS, default="h-d-lookahead", help="the privileged teacher whose choice "
+                   "is executed and labelled")
     s = sub.add_parser("status", help="print what the dataset holds")
     s.add_argument("folder", type=pathlib.Path, nargs="?", default=pathlib.Path("data/teacher"),
                    help="the dataset folder")
@@ -444,7 +464,7 @@ def main(argv: list[str] | None = None) -> int:
         jobs = [{"out": args.out, "series": args.series + k, "hours": args.hours, "ns": tuple(args.ns),
                  "model_path": None if args.model == "none" else args.model,
                  "episodes_per_shard": args.episodes_per_shard, "max_shards": args.max_shards,
-                 "max_probes": args.max_probes} for k in range(args.workers)]
+                 "max_probes": args.max_probes, "teacher": args.teacher} for k in range(args.workers)]
         if args.workers == 1:
             written = [_collect_worker(jobs[0])]
         else:

@@ -35,6 +35,7 @@ from __future__ import annotations
 import hashlib
 import os
 import pickle
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -88,8 +89,10 @@ def digest(obs: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(obs).tobytes()).hexdigest()
 
 
-def probe_step(env: gym.Env, action: int) -> Outcome:
-    """The `Outcome` of ``env.step(action)``, computed in a forked copy; ``env`` is left untouched."""
+def in_fork(env: gym.Env, work: Callable[[Any], dict[str, Any]], what: str) -> dict[str, Any]:
+    """``work(base env)`` run in a forked copy of this process, which holds the env's PyBullet DIRECT
+    physics, so the copy continues exactly the simulation the parent would; its report (a picklable
+    dict) comes back through a pipe and ``env`` is left untouched. ``what`` names the work in errors."""
     base = env.unwrapped
     if not isinstance(base, ShelfSortEnv):
         raise ValueError(f"probe_step needs a ShelfSort-v0 env, got {type(base).__name__}")
@@ -103,14 +106,11 @@ def probe_step(env: gym.Env, action: int) -> Outcome:
                            f"client uses connection method {method}")
     read_fd, write_fd = os.pipe()
     pid = os.fork()
-    if pid == 0:  # the copy: step, report, leave without running any of the parent's exit handlers
+    if pid == 0:  # the copy: work, report, leave without running any of the parent's exit handlers
         status = 0
         try:
             os.close(read_fd)
-            obs, reward, terminated, _, info = base.step(int(action))
-            payload = {"reward": float(reward), "terminated": bool(terminated), "fell": bool(info["fell"]),
-                       "is_success": bool(info["is_success"]), "num_sorted": int(info["num_sorted"]),
-                       "obs_sha256": digest(obs), "next_obs": np.asarray(obs)}
+            payload = work(base)
         except BaseException as err:  # noqa: BLE001  (reported to the parent, which raises it)
             payload, status = {"error": f"{type(err).__name__}: {err}"}, 1
         data = pickle.dumps(payload)  # this process's own copy: a trusted pickle
@@ -124,11 +124,23 @@ def probe_step(env: gym.Env, action: int) -> Outcome:
             chunks.append(chunk)
     os.waitpid(pid, 0)
     if not chunks:
-        raise RuntimeError(f"probe_step: the forked copy stepping action {action} died without a report")
+        raise RuntimeError(f"probe_step: the forked copy {what} died without a report")
     report = pickle.loads(b"".join(chunks))  # noqa: S301  (written by our own fork above)
     if "error" in report:
-        raise RuntimeError(f"probe_step: stepping action {action} in the forked copy failed: {report['error']}")
-    return Outcome(**report)
+        raise RuntimeError(f"probe_step: {what} in the forked copy failed: {report['error']}")
+    return report
+
+
+def probe_step(env: gym.Env, action: int) -> Outcome:
+    """The `Outcome` of ``env.step(action)``, computed in a forked copy; ``env`` is left untouched."""
+
+    def step(base: Any) -> dict[str, Any]:
+        obs, reward, terminated, _, info = base.step(int(action))
+        return {"reward": float(reward), "terminated": bool(terminated), "fell": bool(info["fell"]),
+                "is_success": bool(info["is_success"]), "num_sorted": int(info["num_sorted"]),
+                "obs_sha256": digest(obs), "next_obs": np.asarray(obs)}
+
+    return Outcome(**in_fork(env, step, f"stepping action {action}"))
 
 
 class LookaheadHeuristic(PickHeuristic):
