@@ -10,13 +10,14 @@ import pytest
 from shelf_env.cli import demo, evaluate, train
 from shelf_env.evaluation import report, traces
 from shelf_env.privileged import dataset
-from shelf_env.training import model_card, ship, zoo
+from shelf_env.training import distill, model_card, ship, zoo
 
 COMMANDS: dict[str, Callable[[list[str]], object]] = {
     "shelf-demo": demo.main, "shelf-evaluate": evaluate.main, "shelf-train": train.main,
     "python -m shelf_env.evaluation.report": report.main, "python -m shelf_env.evaluation.traces": traces.main,
     "python -m shelf_env.privileged.dataset": dataset.main, "python -m shelf_env.training.model_card": model_card.main,
     "python -m shelf_env.training.ship": ship.main, "python -m shelf_env.training.zoo": zoo.main,
+    "python -m shelf_env.training.distill": distill.main,
 }
 
 

@@ -32,14 +32,19 @@ def write(folder: pathlib.Path, rows: dict[str, str]) -> None:
 def test_a_folder_without_its_command_date_or_machine_is_refused_by_name(tmp_path: pathlib.Path,
                                                                          capsys: pytest.CaptureFixture[str]) -> None:
     full = {"command": "`x`", "date": "2026-12-03", "machine": "2 CPU cores", "page": "docs/results.md"}
+    pages = tmp_path.parent / f"{tmp_path.name}_pages"
+    tmp_path = tmp_path / "results"
     write(tmp_path / "good", full)
-    assert results_index.main(["--results", str(tmp_path)]) == 0
+    pages.mkdir()
+    (pages / "x.md").write_text("# X\n\n| | |\n|---|---|\n| date | 2026-12-01 |\n| verdict | Yes. |\n")
+    assert results_index.main(["--results", str(tmp_path), "--experiments", str(pages)]) == 0
+    assert "| [X](x.md) | 2026-12-01 | Yes. |" in (pages / "README.md").read_text()
     assert "| [good/](good/) | A result | `x` | 2026-12-03 | 2 CPU cores |" in (tmp_path / "README.md").read_text()
     write(tmp_path / "nodate", {k: v for k, v in full.items() if k != "date"})
     (tmp_path / "README.md").unlink()
-    assert results_index.main(["--results", str(tmp_path)]) == 2
+    assert results_index.main(["--results", str(tmp_path), "--experiments", str(pages)]) == 2
     assert "nodate/README.md names no date" in capsys.readouterr().err
     assert not (tmp_path / "README.md").exists()
     (tmp_path / "nodate" / "README.md").unlink()
-    assert results_index.main(["--results", str(tmp_path)]) == 2
+    assert results_index.main(["--results", str(tmp_path), "--experiments", str(pages)]) == 2
     assert "nodate has no README.md" in capsys.readouterr().err
