@@ -4,8 +4,9 @@
         --out runs/distilled.zip --epochs 10 [--max-states 10000]
 
 The dataset's scenes are split by scene (every state of a held-out scene is held out): the last
-``--val-fraction`` of its scenes, in shard order, are validation. Each epoch reports the training
-loss and, on the validation states, the loss and ``invalid_choice``: how often the model's best
+``--val-fraction`` of its scenes, in shard order, are validation. The report starts with the
+starting model on the validation states (epoch 0); each epoch then reports the training loss and,
+on the validation states, the loss and ``invalid_choice``: how often the model's best
 labelled action of a state is one that ended the episode invalid (the driving model's greedy
 action is labelled in every state, so this includes its choice). ``--max-states`` takes the first
 states of the training scenes only, for a scaling curve. The model is saved atomically (an SB3 zip
@@ -47,7 +48,7 @@ def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[li
 
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
         max_states: int | None = None, batch_states: int = 16, margin: float = 1.0,
-        learning_rate: float | None = None, seed: int = 0) -> dict[str, Any]:
+        learning_rate: float | None = None, seed: int = 0, max_shards: int | None = None) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report."""
     from sb3_pixeldqn import PixelDoubleDQN
 
@@ -59,7 +60,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     if learning_rate is not None:
         for group in model.policy.optimizer.param_groups:
             group["lr"] = learning_rate
-    shards = dataset.load_dataset(data)
+    shards = dataset.load_dataset(data)[:max_shards]  # the first shards in name order: a growing dataset's past
     stored = shards[0].meta["layout"]
     if list(stored["obs_shape"]) != list(model.observation_space.shape) or \
             len(stored["map_names"]) != model.policy.n_maps:
@@ -72,7 +73,10 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     train: LabelledStates = labelled.subset(np.array(train_idx))
     val = labelled.subset(np.array(val_idx)) if val_idx else None
     start = time.monotonic()
-    history = []
+    history: list[dict[str, Any]] = []
+    if val is not None:  # the starting model, for comparison
+        history.append({"epoch": 0, "val": evaluate(model.policy, val, margin)})
+        print(json.dumps(history[-1]), flush=True)
     for epoch in range(epochs):
         row: dict[str, Any] = {"epoch": epoch + 1, "train": distill(model, train, 1, batch_states, margin,
                                                                      seed=seed + epoch)[0]}
@@ -81,7 +85,8 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         history.append(row)
         print(json.dumps(row), flush=True)
     model.save(out)
-    report = {"data": str(data), "init": init, "out": str(out), "train_states": len(train.obs),
+    report = {"data": str(data), "shards": [s.path.name for s in shards], "init": init, "out": str(out),
+              "train_states": len(train.obs),
               "train_labels": len(train.label_action), "val_states": 0 if val is None else len(val.obs),
               "epochs": epochs, "seconds": round(time.monotonic() - start, 1), "history": history}
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
@@ -100,10 +105,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--margin", type=float, default=1.0, help="the ranking and teacher losses' margin")
     p.add_argument("--learning-rate", type=float, default=None, help="the optimiser's rate (default: the model's)")
     p.add_argument("--seed", type=int, default=0, help="seed of the batch order")
+    p.add_argument("--max-shards", type=int, default=None, help="use the first this many shards (in name order)")
     args = p.parse_args(argv)
     try:
         run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
-            args.margin, args.learning_rate, args.seed)
+            args.margin, args.learning_rate, args.seed, args.max_shards)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2
