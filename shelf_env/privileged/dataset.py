@@ -57,12 +57,12 @@ import numpy as np
 
 from sb3_pixeldqn.distill import LabelledStates
 from shelf_env import params
+from shelf_env.actions import PRIMITIVES
 from shelf_env.baselines.heuristics import ObservationView
 from shelf_env.env import DYNAMICS_VERSION
 from shelf_env.files import write_atomically
-from shelf_env.policies import masked_greedy
-from shelf_env.privileged.lookahead import LookaheadDistance, LookaheadHeuristic, Outcome, probe_step
-from shelf_env.privileged.planning import PlanningTeacher
+from shelf_env.policies import POLICIES, masked_greedy
+from shelf_env.privileged.lookahead import LookaheadHeuristic, Outcome, probe_step
 
 #: Version of the shard layout below; a shard of another is refused.
 FORMAT = 1
@@ -72,9 +72,9 @@ DATASET_SEED = 9038
 SOURCES = ("greedy", "teacher", "object", "push", "random")
 #: Observation layout of the dataset: that of the shipped P+S (10 mm cells, pick + pushes).
 PIXEL_SIZE = 0.01
-PRIMITIVES = ("pick", "push")
 DEFAULT_NS = tuple(range(3, 15))
 STATE_KEYS = ("state_episode", "state_step", "teacher_action", "teacher_value", "executed_action")
+EPISODE_STATE_KEYS = STATE_KEYS[1:]  # state_episode is numbered when the shard is saved
 LABEL_KEYS = ("label_state", "label_action", "label_valid", "label_fell", "label_success", "label_dsorted",
               "label_source")
 
@@ -100,7 +100,7 @@ class Episode:
 
     def __init__(self) -> None:
         self.obs: list[np.ndarray] = []
-        self.states: dict[str, list[Any]] = {k: [] for k in STATE_KEYS}
+        self.states: dict[str, list[Any]] = {k: [] for k in EPISODE_STATE_KEYS}
         self.labels: dict[str, list[Any]] = {k: [] for k in LABEL_KEYS}
         self.actions: list[int] = []
 
@@ -124,14 +124,8 @@ def probe_actions(env: gym.Env, teacher: LookaheadHeuristic, view: ObservationVi
     return out[:max_probes]
 
 
-#: The teachers a collection may use (``--teacher``).
+#: The teachers a collection may use (``--teacher``): registered policy names (`shelf_env.policies`).
 TEACHERS = ("h-d-lookahead", "h-d-planner")
-
-
-def make_teacher(name: str, env: gym.Env) -> LookaheadHeuristic:
-    if name not in TEACHERS:
-        raise ValueError(f"unknown teacher {name!r}; known: {list(TEACHERS)}")
-    return LookaheadDistance(env) if name == "h-d-lookahead" else PlanningTeacher(env)
 
 
 def collect_episode(env: gym.Env, model: Any, seed: int, rng: np.random.Generator, explore: float = 0.3,
@@ -140,7 +134,9 @@ def collect_episode(env: gym.Env, model: Any, seed: int, rng: np.random.Generato
     ``model``: anything with SB3's ``predict(obs, deterministic, action_masks)``, whose greedy action is
     labelled first and sometimes executed; None for the teacher alone."""
     base: Any = env.unwrapped
-    teacher = make_teacher(teacher_name, env)
+    if teacher_name not in TEACHERS:
+        raise ValueError(f"unknown teacher {teacher_name!r}; known: {list(TEACHERS)}")
+    teacher: LookaheadHeuristic = POLICIES[teacher_name](env, 0)
     episode = Episode()
     obs, info = env.reset(seed=seed)
     sorted_now = int(info["num_sorted"])
@@ -179,8 +175,8 @@ def collect_episode(env: gym.Env, model: Any, seed: int, rng: np.random.Generato
         elif choice not in valid:
             executed = valid[int(rng.integers(len(valid)))] if valid else -1
         teacher_value = getattr(teacher, "value", None)
-        row = (0, step, choice, np.nan if teacher_value is None else teacher_value, executed)
-        for key, value in zip(STATE_KEYS, row):
+        row = (step, choice, np.nan if teacher_value is None else teacher_value, executed)
+        for key, value in zip(EPISODE_STATE_KEYS, row):
             episode.states[key].append(value)
         if executed < 0:
             break  # nothing probed keeps the scene valid: no state after this one to show
@@ -201,8 +197,9 @@ def save_shard(path: pathlib.Path, meta: dict[str, Any], episodes: list[Episode]
     states: dict[str, list[Any]] = {k: [] for k in STATE_KEYS}
     labels: dict[str, list[Any]] = {k: [] for k in LABEL_KEYS}
     for i, ep in enumerate(episodes):
-        for k in STATE_KEYS:
-            states[k] += [i] * len(ep.obs) if k == "state_episode" else ep.states[k]
+        states["state_episode"] += [i] * len(ep.obs)
+        for k in EPISODE_STATE_KEYS:
+            states[k] += ep.states[k]
         for k in LABEL_KEYS:
             labels[k] += [s + offset for s in ep.labels[k]] if k == "label_state" else ep.labels[k]
         offset += len(ep.obs)
@@ -299,13 +296,14 @@ def replay_states(shard: Shard, max_labels: int | None = None) -> tuple[int, int
                 return obs, int(info["num_sorted"])
 
             for s_index in states:
-                obs, _ = state_at(int(a["state_step"][s_index]))
+                obs, before = state_at(int(a["state_step"][s_index]))
                 if not np.array_equal(obs, a["obs"][s_index]):
                     mismatches.append(f"state {s_index}: the replayed observation differs")
-                for k in np.flatnonzero(a["label_state"] == s_index):
+                for j, k in enumerate(np.flatnonzero(a["label_state"] == s_index)):
                     if max_labels is not None and checked >= max_labels:
                         break
-                    _, before = state_at(int(a["state_step"][s_index]))
+                    if j:  # the previous label stepped the replay on: back to the state
+                        state_at(int(a["state_step"][s_index]))
                     _, _, terminated, _, info = env.step(int(a["label_action"][k]))
                     valid = not terminated or bool(info["is_success"])
                     got = (valid, bool(info["fell"]), int(info["num_sorted"]) - before, bool(info["is_success"]))
@@ -364,6 +362,7 @@ def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence
     env = gym.make("ShelfSort-v0", num_objects=max(ns), object_set=object_set, primitives=PRIMITIVES,
                    pixel_size=PIXEL_SIZE)
     start, written, shard = time.monotonic(), 0, 0
+    env_layout = layout(env)
     try:
         while max_shards is None or shard < max_shards:
             path = shard_path(out, series, shard)
@@ -381,13 +380,13 @@ def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence
                 ep = collect_episode(env, model, seed, rng, explore, max_probes, teacher)
                 episodes.append(ep)
                 metas.append({"reset_seed": seed, "num_objects": n, "actions": ep.actions})
-            meta = {"format": FORMAT, "dynamics_version": DYNAMICS_VERSION, "layout": layout(env),
+            meta = {"format": FORMAT, "dynamics_version": DYNAMICS_VERSION, "layout": env_layout,
                     "object_set": object_set, "teacher": teacher, "model": model_path, "explore": explore,
                     "max_probes": max_probes, "series": series, "shard": shard, "episodes": metas,
                     "seconds": round(time.monotonic() - t0, 1), "machine": f"{platform.machine()}, "
                     f"{os.cpu_count()} CPUs", "collected": time.strftime("%Y-%m-%d")}
             write_atomically(path, functools.partial(save_shard, meta=meta, episodes=episodes,
-                                                     obs_shape=layout(env)["obs_shape"]))
+                                                     obs_shape=env_layout["obs_shape"]))
             written += 1
             states, labels = sum(len(ep.obs) for ep in episodes), sum(len(ep.labels["label_action"])
                                                                         for ep in episodes)
