@@ -26,7 +26,7 @@ It knows nothing of shelves: actions are flat indices of the policy's maps.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -44,6 +44,7 @@ class LabelledStates:
     label_invalid: np.ndarray  # (K,) bool
     label_value: np.ndarray  # (K,) float, NaN where unknown
     teacher_action: np.ndarray  # (S,) int, -1 where none
+    _index: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False, compare=False)
 
     def check(self, obs_shape: tuple[int, ...], n_actions: int) -> None:
         """A `ValueError` naming what does not fit the policy's observation and action spaces."""
@@ -62,15 +63,24 @@ class LabelledStates:
         if (self.teacher_action >= n_actions).any():
             raise ValueError(f"labelled states: a teacher action outside [0, {n_actions})")
 
-    def subset(self, states: np.ndarray) -> LabelledStates:
-        """The states ``states`` (indices) and their labels, renumbered."""
-        states = np.asarray(states, dtype=np.int64)
-        new_index = np.full(len(self.obs), -1, np.int64)
-        new_index[states] = np.arange(len(states))
-        keep = new_index[self.label_state] >= 0
-        return LabelledStates(self.obs[states], new_index[self.label_state[keep]], self.label_action[keep],
-                              self.label_invalid[keep], self.label_value[keep], self.teacher_action[states])
+    def labels_of(self) -> tuple[np.ndarray, np.ndarray]:
+        """The labels sorted by state (a stable order) and where each state's run of them starts
+        (``starts[s]:starts[s + 1]``): built once, so that `subset` touches only the labels it takes."""
+        if self._index is None:
+            order = np.argsort(self.label_state, kind="stable")
+            starts = np.concatenate([[0], np.cumsum(np.bincount(self.label_state, minlength=len(self.obs)))])
+            self._index = (order, starts)
+        return self._index
 
+    def subset(self, states: np.ndarray) -> LabelledStates:
+        """The states ``states`` (indices) and their labels, renumbered; costs the size of the subset,
+        not of the whole data (a training batch is one)."""
+        states = np.asarray(states, dtype=np.int64)
+        order, starts = self.labels_of()
+        counts = starts[states + 1] - starts[states]
+        rows = np.concatenate([order[starts[i]:starts[i + 1]] for i in states]) if len(states) else order[:0]
+        return LabelledStates(self.obs[states], np.repeat(np.arange(len(states)), counts), self.label_action[rows],
+                              self.label_invalid[rows], self.label_value[rows], self.teacher_action[states])
 
 def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
                       value: th.Tensor, teacher: th.Tensor, margin: float = 1.0,
@@ -101,17 +111,18 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
 
 
 def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: float,
-               weights: tuple[float, float, float]) -> tuple[th.Tensor, dict[str, float]]:
-    """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network."""
+               weights: tuple[float, float, float]) -> tuple[th.Tensor, dict[str, float], th.Tensor, LabelledStates]:
+    """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network, with the
+    Q-values of their labelled actions and the subset they index."""
     sub = data.subset(states)
     device = policy.device
-    images = policy.images(th.as_tensor(sub.obs, device=device))
-    q = policy.q_net.q_maps(images).flatten(1)
-    return distillation_loss(q, th.as_tensor(sub.label_state, device=device),
-                             th.as_tensor(sub.label_action, device=device),
-                             th.as_tensor(sub.label_invalid, device=device),
-                             th.as_tensor(sub.label_value, dtype=th.float32, device=device),
-                             th.as_tensor(sub.teacher_action, device=device), margin, weights)
+    q = policy.q_net.q_maps(policy.images(th.as_tensor(sub.obs, device=device))).flatten(1)
+    label_state = th.as_tensor(sub.label_state, device=device)
+    label_action = th.as_tensor(sub.label_action, device=device)
+    loss, parts = distillation_loss(q, label_state, label_action, th.as_tensor(sub.label_invalid, device=device),
+                                    th.as_tensor(sub.label_value, dtype=th.float32, device=device),
+                                    th.as_tensor(sub.teacher_action, device=device), margin, weights)
+    return loss, parts, q[label_state, label_action], sub
 
 
 def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
@@ -125,13 +136,11 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
     with th.no_grad():
         for start in range(0, len(data.obs), chunk):
             states = np.arange(start, min(start + chunk, len(data.obs)))
-            loss, parts = batch_loss(policy, data, states, margin, weights)
-            totals["loss"] += float(loss.detach()) * len(states)
+            loss, parts, q_labels, sub = batch_loss(policy, data, states, margin, weights)
+            totals["loss"] += float(loss) * len(states)
             for key, v in parts.items():
                 totals[key] += v * len(states)
-            sub = data.subset(states)
-            q = policy.q_net.q_maps(policy.images(th.as_tensor(sub.obs, device=policy.device))).flatten(1)
-            qa = q[th.as_tensor(sub.label_state), th.as_tensor(sub.label_action)].cpu().numpy()
+            qa = q_labels.cpu().numpy()
             for s in range(len(states)):
                 rows = np.flatnonzero(sub.label_state == s)
                 if len(rows):
@@ -140,7 +149,6 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
     out = {k: v / max(len(data.obs), 1) for k, v in totals.items()}
     out["invalid_choice"] = invalid_choices / max(chosen, 1)
     return out
-
 
 def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
             weights: tuple[float, float, float] = (1.0, 1.0, 1.0), seed: int = 0) -> list[dict[str, float]]:
@@ -158,7 +166,7 @@ def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int
         order = rng.permutation(len(data.obs))
         for start in range(0, len(order), batch_states):
             states = order[start:start + batch_states]
-            loss, parts = batch_loss(policy, data, states, margin, weights)
+            loss, parts, _, _ = batch_loss(policy, data, states, margin, weights)
             policy.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             policy.optimizer.step()
