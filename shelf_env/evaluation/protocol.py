@@ -34,7 +34,6 @@ from shelf_env import params
 from shelf_env.files import write_atomically, write_json_atomically
 from shelf_env.policies import (  # noqa: F401  (re-exported: the evaluation's names for policies)
     LOOP_BREAKER,
-    POLICIES,
     check_policy,
     checkpoint_pixel_size,
     checkpoint_primitives,

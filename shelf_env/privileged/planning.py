@@ -72,7 +72,6 @@ class PlanningTeacher(LookaheadHeuristic):
             raise ValueError(f"need horizon >= 1, max_candidates >= 1 and 0 < gamma < 1, got {horizon}, "
                              f"{max_candidates} and {gamma}")
         self.horizon, self.max_candidates, self.gamma = int(horizon), int(max_candidates), float(gamma)
-        self.base_class = base
         self.stats = dict.fromkeys(PLANNING_STAT_KEYS, 0)
         self.value: float | None = None
 
@@ -104,7 +103,7 @@ class PlanningTeacher(LookaheadHeuristic):
         self.stats["planned"] += 1
         scores = []
         for action in safe:
-            result = rollout(self.env, action, self.horizon, self.gamma, self.base_class)
+            result = rollout(self.env, action, self.horizon, self.gamma, type(self.base))
             self.stats["rollouts"] += 1
             self.stats["actions"] += int(result["actions"])
             scores.append(float(result["score"]))
