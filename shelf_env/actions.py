@@ -155,3 +155,29 @@ class ActionCodec:
         if name not in MIRROR_MAP:
             raise ValueError(f"no mirror image for map {name!r}")
         return self.encode(MIRROR_MAP[name], row, self.cols - 1 - col)
+
+
+def occupancy_masks(occupied: np.ndarray, pixel_size: float, names: Sequence[str],
+                    pick: np.ndarray | None = None) -> np.ndarray:
+    """The allowed actions of ShelfSort-v0 (`ShelfSortEnv.action_masks`) given the visible object cells
+    ``occupied`` ((H, W) bool), flat in the order of the maps ``names``: a pick on an object cell (or
+    where ``pick`` allows one), a push whose blade (one row either side of its start cell) meets an
+    object cell within the push length in its direction. Nothing visible: every action is allowed."""
+    rows, cols_n = occupied.shape
+    band = occupied.copy()  # the blade is ~1 cm (2 cells) deep: count neighbouring rows
+    band[1:] |= occupied[:-1]
+    band[:-1] |= occupied[1:]
+    reach = int(round(params.PUSH_LENGTH / pixel_size))
+    counts = np.concatenate([np.zeros((rows, 1), dtype=np.int64), np.cumsum(band, axis=1)], axis=1)
+    cols = np.arange(cols_n)
+    masks = {
+        "pick": occupied if pick is None else pick,
+        # push-left moves towards col 0: objects in cols [c - reach, c]
+        "push_left": (counts[:, cols + 1] - counts[:, np.maximum(cols - reach, 0)]) > 0,
+        "push_right": (counts[:, np.minimum(cols + reach, cols_n - 1) + 1] - counts[:, cols]) > 0,
+    }
+    mask = np.concatenate([masks[name].reshape(-1) for name in names])
+    if not mask.any():  # nothing visible (e.g. perception noise dropped every object): no guidance
+        mask[:] = True
+    return mask
+

@@ -102,7 +102,7 @@ import numpy as np
 import pybullet as pb
 
 from shelf_env import params
-from shelf_env.actions import PRIMITIVES, ActionCodec, clip_target, map_names
+from shelf_env.actions import PRIMITIVES, ActionCodec, clip_target, map_names, occupancy_masks
 from shelf_env.camera.heightmap import CLASS_RGB, CameraConfig, HeightmapCamera, recolour, region_masks
 from shelf_env.conditions.closed_loop import DragWatch, WatchedPrimitives
 from shelf_env.conditions.perception_noise import PerceptionNoise
@@ -527,27 +527,12 @@ class ShelfSortEnv(gym.Env):
         if self._semantic is None:
             raise RuntimeError("call reset() before action_masks()")
         occupied = self._semantic[0] >= 0
-        band = occupied.copy()  # the blade is ~1 cm (2 cells) deep: count neighbouring rows
-        band[1:] |= occupied[:-1]
-        band[:-1] |= occupied[1:]
-        reach = int(round(params.PUSH_LENGTH / self.camera.pixel_size))
-        counts = np.concatenate([np.zeros((self.rows, 1), dtype=np.int64), np.cumsum(band, axis=1)], axis=1)
-        cols = np.arange(self.cols)
-        pick = occupied
+        pick = None
         if self.safe_picks:
             clear = carry_clear(*self._semantic, self.camera.pixel_size, z_carry=carry_height(self.robot.motion),
                                 max_shift=self.detour_reach)
             pick = clear if clear.any() else occupied
-        masks = {
-            "pick": pick,
-            # push-left moves towards col 0: objects in cols [c - reach, c]
-            "push_left": (counts[:, cols + 1] - counts[:, np.maximum(cols - reach, 0)]) > 0,
-            "push_right": (counts[:, np.minimum(cols + reach, self.cols - 1) + 1] - counts[:, cols]) > 0,
-        }
-        mask = np.concatenate([masks[name].reshape(-1) for name in self.map_names])
-        if not mask.any():  # nothing visible (e.g. perception noise dropped every object): no guidance
-            mask[:] = True
-        return mask
+        return occupancy_masks(occupied, self.camera.pixel_size, self.map_names, pick)
 
     def _place_for(self, uid: int, min_front: float = 0.0) -> tuple[float, float] | None:
         """Tool (x, y) that puts the held object's centre where the place heuristic wants it; with

@@ -135,3 +135,41 @@ def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(one_sh
     assert distill_cli.main(["--data", str(one_shard), "--init", str(tmp_path / "none.zip"), "--out",
                              str(tmp_path / "x.zip")]) == 2
     assert not (tmp_path / "x.zip").exists()
+
+
+def test_shards_become_exact_transitions_for_the_demonstration_store(one_shard: pathlib.Path) -> None:
+    from shelf_env.training import config as cfg
+
+    shard = dataset.load_shard(dataset.shard_path(one_shard, 0, 0))
+    a = shard.arrays
+    data = dataset.transitions([shard])
+    assert len(data) >= 1 and len(data.obs) == shard.num_states
+    step = {(int(e), int(t)): i for i, (e, t) in enumerate(zip(a["state_episode"], a["state_step"]))}
+    for k in range(len(data)):
+        i, action = int(data.state[k]), int(data.action[k])
+        label = np.flatnonzero((a["label_state"] == i) & (a["label_action"] == action))
+        assert len(label) == 1  # every transition is a labelled action of its state
+        valid, success = bool(a["label_valid"][label[0]]), bool(a["label_success"][label[0]])
+        if data.done[k]:  # exact terminal outcomes: a fall or the goal
+            assert data.next_state[k] == -1 and data.reward[k] == (0.0 if success else -10.0) and (success or not valid)
+        else:  # the executed action, and the state stored after it
+            assert action == a["executed_action"][i] and valid and not success and data.reward[k] == -1.0
+            assert data.next_state[k] == step[(int(a["state_episode"][i]), int(a["state_step"][i]) + 1)]
+        assert data.expert[k] == (action == a["teacher_action"][i] == a["executed_action"][i])
+    terminal = int((~a["label_valid"] | a["label_success"]).sum())
+    assert int(data.done.sum()) == terminal  # every terminal label is kept
+
+    config = cfg.TrainConfig(demo_policy=None, demo_data=str(one_shard), pixel_size=0.01, augment=())
+    env = cfg.make_env(config, 2)
+    try:
+        model = cfg.make_model(config, env)
+        assert cfg.load_demonstration_data(model, config, log=lambda line: None) == len(data)
+        demos = model.replay_buffer.demonstrations
+        assert demos.n_stored == len(data) and int(demos.expert[: len(data)].sum()) == int(data.expert.sum())
+        five_mm = cfg.make_model(config.replace(pixel_size=0.005), cfg.make_env(config.replace(pixel_size=0.005), 2))
+        with pytest.raises(ValueError, match="demo_data .*observations"):
+            cfg.load_demonstration_data(five_mm, config, log=lambda line: None)
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="demo_data"):
+        cfg.TrainConfig(demo_data=str(one_shard))  # beside the default demo_policy h-a

@@ -179,3 +179,23 @@ def test_set_num_objects_mid_episode_keeps_the_episode_n(env):
     assert info["num_objects"] == 2
     env.reset(seed=2)
     assert len(env.world.objects) == 5
+
+
+@pytest.mark.parametrize("pixel_size", [0.01, 0.005])
+def test_masks_read_from_the_observation_alone_equal_the_envs(pixel_size):
+    from shelf_env.camera.heightmap import observation_masks
+
+    env = gym.make("ShelfSort-v0", num_objects=6, pixel_size=pixel_size).unwrapped
+    rng = np.random.default_rng(0)
+    try:
+        for seed in range(3):
+            obs, _ = env.reset(seed=seed)
+            for _ in range(3):  # the scene as it starts and after a few allowed actions
+                mask = env.action_masks()
+                assert mask.sum() < mask.size  # objects are visible: the mask says something
+                assert np.array_equal(observation_masks(obs, pixel_size, env.map_names), mask)
+                obs, _, terminated, truncated, _ = env.step(int(rng.choice(np.flatnonzero(mask))))
+                if terminated or truncated:
+                    break
+    finally:
+        env.close()

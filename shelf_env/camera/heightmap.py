@@ -14,13 +14,14 @@ colours so that hindsight relabelling can recolour the same view with other clas
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pybullet as pb
 
 from shelf_env import params
-from shelf_env.actions import cell_centres
+from shelf_env.actions import cell_centres, occupancy_masks
 
 FREE = -1
 OCCLUDED = -2
@@ -232,3 +233,12 @@ def recolour(cell_uid: np.ndarray, height: np.ndarray, class_of_uid: dict[int, i
         rgb[cell_uid == uid] = CLASS_RGB[cls]
     h8 = np.clip(np.round(height / params.CABINET_HEIGHT * 255), 0, 255).astype(np.uint8)
     return np.concatenate([rgb.transpose(2, 0, 1), h8[None]], axis=0)
+
+
+def observation_masks(obs: np.ndarray, pixel_size: float, names: Sequence[str]) -> np.ndarray:
+    """`shelf_env.actions.occupancy_masks` read from an observation ``(4, H, W)`` alone: its object
+    cells are those in a class colour. Equal to the env's ``action_masks()`` without ``safe_picks`` (a
+    test checks it), so stored observations (the teacher dataset's) get their masks back without the simulator."""
+    rgb = np.moveaxis(np.asarray(obs)[:3], 0, -1)
+    occupied = (rgb[:, :, None, :] == CLASS_RGB[None, None]).all(axis=-1).any(axis=-1)
+    return occupancy_masks(occupied, pixel_size, names)

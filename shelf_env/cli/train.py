@@ -63,6 +63,7 @@ from shelf_env.training.config import (
     field_help,
     guarded,
     init_from_checkpoint,
+    load_demonstration_data,
     make_actor_env,
     make_callbacks,
     make_model,
@@ -389,6 +390,10 @@ def train(args: argparse.Namespace) -> None:
     demos = demo_policy(config, env)
     buffer = model.replay_buffer
     assert isinstance(buffer, HindsightRelabelReplayBuffer)
+    if config.demo_data is not None and buffer.demonstrations is None:
+        start = time.monotonic()
+        load_demonstration_data(model, config, log=lambda line: print(line, flush=True))
+        progress["demo_seconds"] = progress.get("demo_seconds", 0.0) + time.monotonic() - start
     if demos is not None and buffer.demonstrations is None:
         seconds = collect_demonstrations(model, config, demos, env.get_wrapper_attr("set_num_objects"),
                                          log=lambda line: print(line, flush=True))

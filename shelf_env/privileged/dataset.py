@@ -337,6 +337,79 @@ def labelled_states(shards: Sequence[Shard], invalid_reward: float = params.REWA
     return LabelledStates(*(np.concatenate([p[i] for p in parts]) for i in range(6)))
 
 
+@dataclass
+class Transitions:
+    """The dataset's exact transitions, for a learner's kept demonstration store (`transitions`).
+    ``next_state`` is -1 for a terminal transition (its next observation does not matter)."""
+
+    obs: np.ndarray  # (S, C, H, W) uint8, the states of the shards in order
+    state: np.ndarray  # (K,) int, index into obs
+    next_state: np.ndarray  # (K,) int, index into obs, -1 where terminal
+    action: np.ndarray  # (K,) int
+    reward: np.ndarray  # (K,) float32
+    done: np.ndarray  # (K,) bool
+    expert: np.ndarray  # (K,) bool: the teacher's executed choice (the margin loss applies)
+
+    def __len__(self) -> int:
+        return len(self.action)
+
+
+def transitions(shards: Sequence[Shard], invalid_reward: float = params.REWARD_INVALID,
+                progress_reward: float = 0.0) -> Transitions:
+    """What the shards know exactly, as (s, a, r, s', done) under the env's reward (Eq. 2, with the
+    training env's ``invalid_reward`` and ``progress_reward``):
+
+    - each executed action whose next state was stored: reward −1 (plus ``progress_reward`` per object
+      it sorted), not terminal; ``expert`` where it was the teacher's choice (the rest were the driving
+      model's greedy action, executed to cover its states: TD loss only);
+    - every labelled action that ended the episode: invalid (``invalid_reward``) or sorting the scene
+      (the goal's reward, 0), terminal, with the TD loss only (not the teacher's choice) unless it was
+      the teacher's executed choice.
+
+    Executed actions after which nothing was stored (the episode's time limit) and labelled actions
+    that kept the episode going (their next state was not stored) are left out."""
+    parts: list[tuple[np.ndarray, ...]] = []
+    offset = 0
+    for shard in shards:
+        a = shard.arrays
+        n = len(a["obs"])
+        key = {(int(e), int(t)): i for i, (e, t) in enumerate(zip(a["state_episode"], a["state_step"]))}
+        executed_label = {(int(s), int(act)): k for k, (s, act) in enumerate(zip(a["label_state"],
+                                                                                  a["label_action"]))}
+        rows: list[tuple[int, int, int, float, bool, bool]] = []
+        for i in range(n):
+            action = int(a["executed_action"][i])
+            k = executed_label.get((i, action))
+            if action < 0 or k is None:
+                continue
+            expert = action == int(a["teacher_action"][i])
+            if a["label_valid"][k] and not a["label_success"][k]:
+                nxt = key.get((int(a["state_episode"][i]), int(a["state_step"][i]) + 1))
+                if nxt is not None:
+                    reward = params.REWARD_STEP + progress_reward * int(a["label_dsorted"][k])
+                    rows.append((i, nxt, action, reward, False, expert))
+        for k in range(len(a["label_action"])):
+            valid, success = bool(a["label_valid"][k]), bool(a["label_success"][k])
+            if valid and not success:
+                continue
+            i, action = int(a["label_state"][k]), int(a["label_action"][k])
+            expert = action == int(a["executed_action"][i]) == int(a["teacher_action"][i])
+            rows.append((i, -1, action, params.REWARD_SORTED if success else invalid_reward, True, expert))
+        if rows:
+            cols = list(zip(*rows))
+            state, nxt = np.array(cols[0]) + offset, np.array(cols[1])
+            parts.append((state, np.where(nxt >= 0, nxt + offset, -1), np.array(cols[2]),
+                          np.array(cols[3], np.float32), np.array(cols[4], bool), np.array(cols[5], bool)))
+        offset += n
+    if not shards:
+        raise ValueError("no shards to take transitions from")
+    obs = np.concatenate([s.arrays["obs"] for s in shards])
+    if not parts:
+        empty = np.zeros(0, np.int64)
+        return Transitions(obs, empty, empty, empty, np.zeros(0, np.float32), np.zeros(0, bool), np.zeros(0, bool))
+    return Transitions(obs, *(np.concatenate([p[i] for p in parts]) for i in range(6)))
+
+
 def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence[int] = DEFAULT_NS,
             model_path: str | None = "examples/pretrained/p_s.zip", episodes_per_shard: int = 2,
             max_shards: int | None = None, explore: float = 0.3, max_probes: int = 24,

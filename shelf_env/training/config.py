@@ -24,6 +24,7 @@ import dataclasses
 import functools
 import math
 import os
+import pathlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -35,8 +36,9 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_pixeldqn.buffers import NOOP_MODES, RELABEL_MODES
 from sb3_pixeldqn.callbacks import GATES
 from shelf_env import params
-from shelf_env.actions import PRIMITIVES, ActionCodec
+from shelf_env.actions import PRIMITIVES, ActionCodec, map_names
 from shelf_env.baselines.heuristics import AccessibilityHeuristic, DistanceHeuristic
+from shelf_env.camera.heightmap import observation_masks
 from shelf_env.env import check_invalid_reward, check_object_count, check_progress_reward
 from shelf_env.evaluation.protocol import check_conditions
 from shelf_env.privileged.lookahead import FallGuard, LookaheadAccessibility, LookaheadDistance, LookaheadHeuristic
@@ -82,6 +84,10 @@ class TrainConfig:
     demo_objects: tuple[int, ...] = (3,)
     # share of each batch drawn from the demonstrations
     demo_fraction: float = 0.5
+    # a teacher dataset folder (shelf_env.privileged.dataset, e.g. data/teacher; null: none) whose exact
+    # transitions fill the kept demonstration store before training: the teacher's executed actions
+    # (margin loss), and every labelled action that dropped an object or sorted the scene (terminal, TD only)
+    demo_data: str | None = None
     # the lookahead teachers' rejected actions (those their probe saw end the episode invalid) kept as
     # terminal transitions of the same state, trained with the TD loss only
     demo_counterfactuals: bool = False
@@ -192,6 +198,10 @@ class TrainConfig:
         if self.demo_counterfactuals and self.demo_policy not in SIMULATOR_DEMOS:
             raise ValueError(f"TrainConfig.demo_counterfactuals needs a demonstrator that probes the simulator "
                              f"({list(SIMULATOR_DEMOS)}), got demo_policy {self.demo_policy!r}")
+        if self.demo_data is not None and (not isinstance(self.demo_data, str) or self.demo_policy is not None):
+            raise ValueError(f"TrainConfig.demo_data must be a dataset folder given with demo_policy null (one "
+                             f"source of demonstrations), got demo_data {self.demo_data!r} and demo_policy "
+                             f"{self.demo_policy!r}")
         if self.guard is not None and self.guard not in SIMULATOR_DEMOS:
             raise ValueError(f"TrainConfig.guard must be a teacher that probes the simulator ({list(SIMULATOR_DEMOS)}) "
                              f"or None, got {self.guard!r}")
@@ -406,6 +416,39 @@ def collect_demonstrations(model: Any, config: TrainConfig, demos: Any, set_num_
     seconds = time.monotonic() - start
     log(f"demonstrations took {seconds:.0f} s")
     return seconds
+
+
+def load_demonstration_data(model: Any, config: TrainConfig, log: Callable[[str], None] = print) -> int:
+    """Fill ``model``'s kept demonstration store with the transitions of the teacher dataset
+    ``config.demo_data`` (`shelf_env.privileged.dataset.transitions`), each non-terminal one with the
+    next state's action mask read from its observation (`shelf_env.actions.observation_masks`). The
+    dataset's observation layout must be the model's; a `ValueError` naming the dataset otherwise.
+    Returns the number of transitions kept."""
+    from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer
+    from shelf_env.privileged import dataset
+
+    assert config.demo_data is not None
+    shards = dataset.load_dataset(pathlib.Path(config.demo_data))
+    stored = shards[0].meta["layout"]
+    names = map_names(config.primitives)
+    if list(stored["obs_shape"]) != list(model.observation_space.shape) or list(stored["map_names"]) != names:
+        raise ValueError(f"demo_data {config.demo_data}: observations {stored['obs_shape']} and maps "
+                         f"{stored['map_names']}; this run has {list(model.observation_space.shape)} and {names}")
+    data = dataset.transitions(shards, config.invalid_reward, config.progress_reward)
+    buffer = model.replay_buffer
+    assert isinstance(buffer, HindsightRelabelReplayBuffer)
+    capacity = len(data) + (config.buffer_size if config.guard is not None else 0)
+    pixel_size = float(stored["pixel_size"])
+    for k in range(len(data)):
+        obs = data.obs[data.state[k]][None]
+        nxt = data.next_state[k]
+        next_obs = obs if nxt < 0 else data.obs[nxt][None]
+        mask = None if nxt < 0 else observation_masks(next_obs[0], pixel_size, stored["map_names"])[None]
+        buffer.add_demonstration(obs, next_obs, data.action[k:k + 1], data.reward[k:k + 1], data.done[k:k + 1],
+                                 [{}], mask, capacity=capacity, expert=bool(data.expert[k]))
+    log(f"demonstrations: {len(data)} transitions of {config.demo_data} ({int(data.expert.sum())} the teacher's "
+        f"choices, {int(data.done.sum())} terminal) from {len(data.obs)} states of {len(shards)} shards")
+    return len(data)
 
 
 def make_model(config: TrainConfig, env: gym.Env | VecEnv, seed: int = 0, tensorboard_log: str | None = None,

@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# The scaling curve of distillation (docs/experiments/distill-scaling.md): the shipped P+S distilled from the
+# first 220, 440 and all training states of the dataset's first 35 shards (70 scenes; the last 20 % of the
+# scenes are the distillation's validation states), then each model's greedy fall rate per action and SR at
+# N = 5, 8, 11 on validation scenes (evaluation seed 2000, YCB), beside the shipped P+S and H-d.
+#   bash results/distill_scaling/run.sh            # distil (about 2 min) and measure (about 40 min, resumable)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+PY=${PYTHON:-.venv/bin/python}
+DIR=results/distill_scaling
+MODELS=runs/distill_scaling
+mkdir -p "$MODELS"
+for n in 220 440 all; do
+  extra=()
+  [ "$n" != all ] && extra=(--max-states "$n")
+  if [ ! -f "$MODELS/p_s_d$n.zip" ]; then
+    "$PY" -m shelf_env.training.distill --data data/teacher --max-shards 35 "${extra[@]}" \
+      --init examples/pretrained/p_s.zip --out "$MODELS/p_s_d$n.zip" --epochs 8 --val-fraction 0.2
+  fi
+  cp "$MODELS/p_s_d$n.distill.json" "$DIR/p_s_d$n.distill.json"
+done
+"$PY" -m shelf_env.evaluation.falls examples/pretrained/p_s.zip "$MODELS/p_s_d220.zip" "$MODELS/p_s_d440.zip" \
+  "$MODELS/p_s_dall.zip" h-d --ns 8 5 11 --runs 10 --seed 2000 --out "$DIR/falls.json"
+"$PY" research/scaling_curve.py "$DIR" --out "$DIR/report.md" --png "$DIR/scaling.png"
