@@ -26,6 +26,7 @@ It knows nothing of shelves: actions are flat indices of the policy's maps.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -81,6 +82,36 @@ class LabelledStates:
         rows = np.concatenate([order[starts[i]:starts[i + 1]] for i in states]) if len(states) else order[:0]
         return LabelledStates(self.obs[states], np.repeat(np.arange(len(states)), counts), self.label_action[rows],
                               self.label_invalid[rows], self.label_value[rows], self.teacher_action[states])
+
+def augmented(data: LabelledStates, transforms: Sequence[Any], n_actions: int,
+              rng: np.random.Generator) -> LabelledStates:
+    """``data`` with every state drawn through ``transforms`` (`PixelDoubleDQN`'s ``augment``: callables
+    ``(obs, action, next_obs, next_mask, rng)``, e.g. exact symmetries of the env): one draw per state,
+    applied alike to its observation, its labelled actions and its teacher action (each call gets a
+    generator seeded the same, so a random transform makes the same choice for all of them)."""
+    if not transforms:
+        return data
+    obs = data.obs.copy()
+    actions = data.label_action.copy()
+    teacher = data.teacher_action.copy()
+    full = np.ones(n_actions, dtype=bool)
+
+    def apply(o: np.ndarray, action: int, seed: int) -> tuple[np.ndarray, int]:
+        draw = np.random.default_rng(seed)
+        for transform in transforms:
+            o, action, _, _ = transform(o, action, o, full, draw)
+        return o, int(action)
+
+    for s in range(len(obs)):
+        seed = int(rng.integers(2**63))
+        rows = np.flatnonzero(data.label_state == s)
+        for k in rows:
+            _, actions[k] = apply(data.obs[s], int(data.label_action[k]), seed)
+        if teacher[s] >= 0:
+            _, teacher[s] = apply(data.obs[s], int(teacher[s]), seed)
+        obs[s] = apply(data.obs[s], 0, seed)[0]
+    return LabelledStates(obs, data.label_state, actions, data.label_invalid, data.label_value, teacher)
+
 
 def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
                       value: th.Tensor, teacher: th.Tensor, margin: float = 1.0,
@@ -151,9 +182,12 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
     return out
 
 def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
-            weights: tuple[float, float, float] = (1.0, 1.0, 1.0), seed: int = 0) -> list[dict[str, float]]:
+            weights: tuple[float, float, float] = (1.0, 1.0, 1.0), seed: int = 0,
+            augment: Sequence[Any] = ()) -> list[dict[str, float]]:
     """Train ``model``'s online Q-network (a `PixelDoubleDQN`) on ``data`` for ``epochs`` passes with its own
-    optimiser, then copy it to the target network. Returns each epoch's mean training loss and terms."""
+    optimiser, then copy it to the target network. ``augment``: transforms each batch's states are drawn
+    through (`augmented`; ``model.augment`` for the model's own). Returns each epoch's mean training loss
+    and terms."""
     policy = model.policy
     data.check(tuple(model.observation_space.shape), int(model.action_space.n))
     if epochs < 1 or batch_states < 1:
@@ -165,8 +199,10 @@ def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int
         sums: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0}
         order = rng.permutation(len(data.obs))
         for start in range(0, len(order), batch_states):
-            states = order[start:start + batch_states]
-            loss, parts, _, _ = batch_loss(policy, data, states, margin, weights)
+            batch = data.subset(order[start:start + batch_states])
+            batch = augmented(batch, augment, int(model.action_space.n), rng)
+            states = np.arange(len(batch.obs))
+            loss, parts, _, _ = batch_loss(policy, batch, states, margin, weights)
             policy.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             policy.optimizer.step()

@@ -86,3 +86,40 @@ def test_bad_labelled_states_are_refused_by_name() -> None:
     with pytest.raises(ValueError, match="outside the states"):
         distill(model, LabelledStates(data.obs[:1], data.label_state, data.label_action, data.label_invalid,
                                       data.label_value, data.teacher_action[:1]))
+
+
+class FlipWidth:
+    """A width flip drawn with probability ½ (the `Transform` interface), for a 12 x 20 single map."""
+
+    def __call__(self, obs, action, next_obs, next_mask, rng):
+        if rng.random() < 0.5:
+            return obs, action, next_obs, next_mask
+        r, c = divmod(int(action), 20)
+        return obs[..., ::-1].copy(), r * 20 + 19 - c, next_obs[..., ::-1].copy(), next_mask
+
+
+def test_augmentation_moves_a_states_labels_and_teacher_with_its_observation() -> None:
+    from sb3_pixeldqn.distill import augmented
+
+    _, data = crafted(n_states=40)
+    out = augmented(data, [FlipWidth()], 240, np.random.default_rng(0))
+    flipped = [s for s in range(40) if not np.array_equal(out.obs[s], data.obs[s])]
+    assert 5 < len(flipped) < 35  # about half the states were drawn flipped
+    for s in range(40):
+        rows = np.flatnonzero(data.label_state == s)
+        r, c = np.divmod(data.label_action[rows], 20)
+        tr, tc = divmod(int(data.teacher_action[s]), 20)
+        if s in flipped:  # every label of the state and its teacher action flipped with it
+            assert np.array_equal(out.obs[s], data.obs[s][..., ::-1])
+            assert np.array_equal(out.label_action[rows], r * 20 + 19 - c)
+            assert out.teacher_action[s] == tr * 20 + 19 - tc
+        else:
+            assert np.array_equal(out.label_action[rows], data.label_action[rows])
+            assert out.teacher_action[s] == data.teacher_action[s]
+    assert np.array_equal(out.label_invalid, data.label_invalid) and np.array_equal(out.label_state, data.label_state)
+    assert augmented(data, [], 240, np.random.default_rng(0)) is data
+    # the square's teacher action still lands on the (flipped) square: training on it stays consistent
+    model, _ = crafted(n_states=1)
+    th.manual_seed(0)
+    history = distill(model, data.subset(np.arange(16)), epochs=30, batch_states=8, augment=[FlipWidth()])
+    assert history[-1]["loss"] < history[0]["loss"]

@@ -16,10 +16,17 @@ for n in 220 440 all; do
   [ "$n" != all ] && extra=(--max-states "$n")
   if [ ! -f "$MODELS/p_s_d$n.zip" ]; then
     "$PY" -m shelf_env.training.distill --data data/teacher --max-shards 35 "${extra[@]}" \
-      --init examples/pretrained/p_s.zip --out "$MODELS/p_s_d$n.zip" --epochs 8 --val-fraction 0.2
+      --init examples/pretrained/p_s.zip --out "$MODELS/p_s_d$n.zip" --epochs 8 --val-fraction 0.2 --no-augment
   fi
   cp "$MODELS/p_s_d$n.distill.json" "$DIR/p_s_d$n.distill.json"
 done
-"$PY" -m shelf_env.evaluation.falls examples/pretrained/p_s.zip "$MODELS/p_s_d220.zip" "$MODELS/p_s_d440.zip" \
-  "$MODELS/p_s_dall.zip" h-d --ns 8 5 11 --runs 10 --seed 2000 --out "$DIR/falls.json"
+# all states again, each batch drawn through the model's own augmentation (mirror, class permutation)
+if [ ! -f "$MODELS/p_s_dall_aug.zip" ]; then
+  "$PY" -m shelf_env.training.distill --data data/teacher --max-shards 35 \
+    --init examples/pretrained/p_s.zip --out "$MODELS/p_s_dall_aug.zip" --epochs 8 --val-fraction 0.2
+fi
+cp "$MODELS/p_s_dall_aug.distill.json" "$DIR/p_s_dall_aug.distill.json"
+"$PY" -m shelf_env.evaluation.falls examples/pretrained/p_s.zip "$MODELS/p_s_dall_aug.zip" h-d \
+  "$MODELS/p_s_dall.zip" "$MODELS/p_s_d440.zip" "$MODELS/p_s_d220.zip" --ns 8 5 11 --runs 10 --seed 2000 \
+  --out "$DIR/falls.json"
 "$PY" research/scaling_curve.py "$DIR" --out "$DIR/report.md" --png "$DIR/scaling.png"

@@ -9,7 +9,9 @@ starting model on the validation states (epoch 0); each epoch then reports the t
 on the validation states, the loss and ``invalid_choice``: how often the model's best
 labelled action of a state is one that ended the episode invalid (the driving model's greedy
 action is labelled in every state, so this includes its choice). ``--max-states`` takes the first
-states of the training scenes only, for a scaling curve. The model is saved atomically (an SB3 zip
+states of the training scenes only, for a scaling curve. Each batch's states are drawn through the
+model's own augmentation (``model.augment``: the shipped P+S's mirror and class permutation, exact
+symmetries of the cabinet) unless ``--no-augment``. The model is saved atomically (an SB3 zip
 that `PixelDoubleDQN.load` and ``shelf-train --init-from`` take); the report goes beside it as JSON.
 """
 
@@ -48,8 +50,10 @@ def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[li
 
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
         max_states: int | None = None, batch_states: int = 16, margin: float = 1.0,
-        learning_rate: float | None = None, seed: int = 0, max_shards: int | None = None) -> dict[str, Any]:
-    """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report."""
+        learning_rate: float | None = None, seed: int = 0, max_shards: int | None = None,
+        augment: bool = True) -> dict[str, Any]:
+    """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
+    draw each batch's states through the model's own augmentation (its exact symmetries), as its training did."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     if epochs < 1 or not 0 <= val_fraction < 1:
@@ -72,6 +76,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         train_idx = train_idx[:max_states]
     train: LabelledStates = labelled.subset(np.array(train_idx))
     val = labelled.subset(np.array(val_idx)) if val_idx else None
+    transforms = list(model.augment) if augment else []
     start = time.monotonic()
     history: list[dict[str, Any]] = []
     if val is not None:  # the starting model, for comparison
@@ -79,7 +84,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         print(json.dumps(history[-1]), flush=True)
     for epoch in range(epochs):
         row: dict[str, Any] = {"epoch": epoch + 1, "train": distill(model, train, 1, batch_states, margin,
-                                                                     seed=seed + epoch)[0]}
+                                                                     seed=seed + epoch, augment=transforms)[0]}
         if val is not None:
             row["val"] = evaluate(model.policy, val, margin)
         history.append(row)
@@ -88,7 +93,8 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     report = {"data": str(data), "shards": [s.path.name for s in shards], "init": init, "out": str(out),
               "train_states": len(train.obs),
               "train_labels": len(train.label_action), "val_states": 0 if val is None else len(val.obs),
-              "epochs": epochs, "seconds": round(time.monotonic() - start, 1), "history": history}
+              "epochs": epochs, "augment": [repr(t) for t in transforms],
+              "seconds": round(time.monotonic() - start, 1), "history": history}
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
 
@@ -106,10 +112,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--learning-rate", type=float, default=None, help="the optimiser's rate (default: the model's)")
     p.add_argument("--seed", type=int, default=0, help="seed of the batch order")
     p.add_argument("--max-shards", type=int, default=None, help="use the first this many shards (in name order)")
+    p.add_argument("--no-augment", action="store_true", help="train on the states as stored (default: drawn "
+                   "through the model's own augmentation)")
     args = p.parse_args(argv)
     try:
         run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
-            args.margin, args.learning_rate, args.seed, args.max_shards)
+            args.margin, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2

@@ -1,0 +1,132 @@
+"""The scaling curve of distillation: greedy fall rate per action and SR against the states distilled.
+
+Reads a results folder holding the distillation reports (``*.distill.json``, `shelf_env.training.distill`)
+and the fall measurements (``falls.json``, `shelf_env.evaluation.falls`) of the distilled models, the
+starting model and reference policies, and writes a Markdown table and a PNG (two panels: invalid
+and fallen actions per greedy action at each N; SR at each N; reference policies as dashed lines).
+
+    python research/scaling_curve.py results/distill_scaling --out results/distill_scaling/report.md \\
+        --png results/distill_scaling/scaling.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+from typing import Any
+
+from shelf_env.files import write_text_atomically
+
+
+def load(folder: pathlib.Path) -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]]]:
+    """The distillation reports by model stem, and the fall cells."""
+    reports = {p.name.removesuffix(".distill.json"): json.loads(p.read_text())
+               for p in sorted(folder.glob("*.distill.json"))}
+    cells = list(json.loads((folder / "falls.json").read_text()).values())
+    if not cells:
+        raise ValueError(f"{folder}/falls.json holds no cells")
+    return reports, cells
+
+
+def rows(reports: dict[str, dict[str, Any]], cells: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per policy: its training states (0 for the starting model, None for a reference),
+    its distillation's last validation loss, and per N the fall cell's numbers."""
+    starts = {r["init"] for r in reports.values()}
+    out: dict[str, dict[str, Any]] = {}
+    for cell in cells:
+        policy = cell["policy"]
+        stem = pathlib.Path(policy).stem if policy.endswith(".zip") else policy
+        row = out.setdefault(policy, {"policy": stem, "states": None, "val_loss": None, "augmented": False,
+                                      "by_n": {}})
+        if stem in reports:
+            row["states"] = reports[stem]["train_states"]
+            row["augmented"] = bool(reports[stem].get("augment"))
+            row["val_loss"] = reports[stem]["history"][-1]["val"]["loss"]
+        elif policy in starts:
+            row["states"] = 0
+            first = next(r for r in reports.values() if r["init"] == policy)["history"][0]
+            row["val_loss"] = first["val"]["loss"]
+        row["by_n"][cell["num_objects"]] = cell
+    return sorted(out.values(), key=lambda r: (r["states"] is None, r["states"] or 0, r["augmented"]))
+
+
+def table(data: list[dict[str, Any]]) -> str:
+    ns = sorted({n for r in data for n in r["by_n"]})
+    head = ["policy", "states distilled", "augmented", "val loss"] + \
+        [f"invalid / fell per action, N = {n}" for n in ns] + [f"SR N = {n}" for n in ns]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in data:
+        cells = [r["policy"], "-" if r["states"] is None else str(r["states"]),
+                 "-" if r["states"] is None else ("yes" if r["augmented"] else "no"),
+                 "-" if r["val_loss"] is None else f"{r['val_loss']:.2f}"]
+        for n in ns:
+            c = r["by_n"].get(n)
+            cells.append("-" if c is None else f"{100 * c['invalid_rate']:.1f} % / {100 * c['fall_rate']:.1f} % "
+                                               f"({c['invalid']}/{c['decisions']})")
+        for n in ns:
+            c = r["by_n"].get(n)
+            cells.append("-" if c is None else f"{c['sr']:.0f} % ({c['episodes']})")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ns = sorted({n for r in data for n in r["by_n"]})
+    curve = [r for r in data if r["states"] is not None and not r["augmented"]]
+    extra = [r for r in data if r["augmented"]]  # off the curve: another recipe at one of its sizes
+    refs = [r for r in data if r["states"] is None]
+    fig, (ax_f, ax_s) = plt.subplots(1, 2, figsize=(10, 4))
+    for i, n in enumerate(ns):
+        pts = [(r["states"], r["by_n"][n]) for r in curve if n in r["by_n"]]
+        colour = f"C{i}"
+        ax_f.plot([p[0] for p in pts], [100 * c["invalid_rate"] for _, c in pts], "o-", color=colour,
+                  label=f"N = {n}")
+        ax_s.plot([p[0] for p in pts], [c["sr"] for _, c in pts], "o-", color=colour, label=f"N = {n}")
+        for r in extra:
+            if n in r["by_n"]:
+                ax_f.plot([r["states"]], [100 * r["by_n"][n]["invalid_rate"]], "*", ms=12, color=colour)
+                ax_s.plot([r["states"]], [r["by_n"][n]["sr"]], "*", ms=12, color=colour)
+        for ref in refs:
+            if n in ref["by_n"]:
+                ax_f.axhline(100 * ref["by_n"][n]["invalid_rate"], color=colour, ls="--", lw=1)
+                ax_s.axhline(ref["by_n"][n]["sr"], color=colour, ls="--", lw=1)
+    ax_f.set(xlabel="training states distilled", ylabel="greedy actions ending the episode invalid (%)",
+             title="invalid actions per greedy action")
+    ax_s.set(xlabel="training states distilled", ylabel="SR (%)", title="greedy SR")
+    names = ", ".join(r["policy"] for r in refs)
+    title = "distillation scaling" + (f" (dashed: {names})" if refs else "") + \
+        (" (stars: with augmentation)" if extra else "")
+    fig.suptitle(title)
+    ax_f.legend()
+    fig.tight_layout()
+    png.parent.mkdir(parents=True, exist_ok=True)
+    tmp = png.with_name(f".{png.name}.partial")
+    fig.savefig(tmp, format="png", dpi=100)
+    tmp.replace(png)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("folder", type=pathlib.Path)
+    p.add_argument("--out", type=pathlib.Path, default=None, help="write the Markdown table here")
+    p.add_argument("--png", type=pathlib.Path, default=None, help="write the plot here")
+    args = p.parse_args(argv)
+    data = rows(*load(args.folder))
+    text = table(data)
+    print(text)
+    if args.out is not None:
+        write_text_atomically(args.out, text)
+    if args.png is not None:
+        plot(data, args.png)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
