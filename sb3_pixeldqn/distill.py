@@ -18,8 +18,11 @@ batch of states is the sum of three terms, each over every labelled pixel:
 - **value**: Huber(Q(s, a), value) on the labels with a known value;
 - **ranking**: every action that kept the episode valid is valued at least ``margin`` above every
   action that ended it invalid, in the same state: mean relu(Q(s, a_inv) + margin − Q(s, a_ok));
-- **teacher**: the large-margin loss of demonstrations on the teacher's action, over the labelled
-  actions: max_a [Q(s, a) + margin·(a ≠ a_T)] − Q(s, a_T).
+- **teacher**: the large-margin loss of demonstrations on the teacher's action: max_a [Q(s, a) +
+  margin·(a ≠ a_T)] − Q(s, a_T), over every action the state's mask allows where the states carry
+  masks (``masks``: the greedy policy's own choice set, so the teacher's action is taught to be its
+  argmax), over the labelled actions otherwise. Without masks a pixel no label covers is never
+  pushed down, and the greedy argmax over thousands of them can land on a safe but useless one.
 
 It knows nothing of shelves: actions are flat indices of the policy's maps.
 """
@@ -45,6 +48,8 @@ class LabelledStates:
     label_invalid: np.ndarray  # (K,) bool
     label_value: np.ndarray  # (K,) float, NaN where unknown
     teacher_action: np.ndarray  # (S,) int, -1 where none
+    #: (S, ceil(n_actions / 8)) uint8: each state's allowed actions, ``np.packbits`` along axis 1; None: no masks
+    masks: np.ndarray | None = None
     _index: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False, compare=False)
 
     def check(self, obs_shape: tuple[int, ...], n_actions: int) -> None:
@@ -63,6 +68,15 @@ class LabelledStates:
             raise ValueError(f"labelled states: a labelled action outside [0, {n_actions})")
         if (self.teacher_action >= n_actions).any():
             raise ValueError(f"labelled states: a teacher action outside [0, {n_actions})")
+        if self.masks is not None and self.masks.shape != (len(self.obs), (n_actions + 7) // 8):
+            raise ValueError(f"labelled states: masks of shape {self.masks.shape}, expected "
+                             f"{(len(self.obs), (n_actions + 7) // 8)} (packed bits of {n_actions} actions per state)")
+
+    def unpacked_masks(self, n_actions: int) -> np.ndarray | None:
+        """The masks as (S, n_actions) bool, None where the states carry none."""
+        if self.masks is None:
+            return None
+        return np.unpackbits(self.masks, axis=1, count=n_actions).astype(bool)
 
     def labels_of(self) -> tuple[np.ndarray, np.ndarray]:
         """The labels sorted by state (a stable order) and where each state's run of them starts
@@ -81,7 +95,8 @@ class LabelledStates:
         counts = starts[states + 1] - starts[states]
         rows = np.concatenate([order[starts[i]:starts[i + 1]] for i in states]) if len(states) else order[:0]
         return LabelledStates(self.obs[states], np.repeat(np.arange(len(states)), counts), self.label_action[rows],
-                              self.label_invalid[rows], self.label_value[rows], self.teacher_action[states])
+                              self.label_invalid[rows], self.label_value[rows], self.teacher_action[states],
+                              None if self.masks is None else self.masks[states])
 
 def augmented(data: LabelledStates, transforms: Sequence[Any], n_actions: int,
               rng: np.random.Generator) -> LabelledStates:
@@ -94,30 +109,36 @@ def augmented(data: LabelledStates, transforms: Sequence[Any], n_actions: int,
     obs = data.obs.copy()
     actions = data.label_action.copy()
     teacher = data.teacher_action.copy()
+    masks = data.unpacked_masks(n_actions)
     full = np.ones(n_actions, dtype=bool)
 
-    def apply(o: np.ndarray, action: int, seed: int) -> tuple[np.ndarray, int]:
+    def apply(o: np.ndarray, action: int, seed: int, mask: np.ndarray = full) -> tuple[np.ndarray, int, np.ndarray]:
         draw = np.random.default_rng(seed)
-        for transform in transforms:
-            o, action, _, _ = transform(o, action, o, full, draw)
-        return o, int(action)
+        for transform in transforms:  # a state's mask goes where a transition's next mask goes: moved alike
+            o, action, _, mask = transform(o, action, o, mask, draw)
+        return o, int(action), mask
 
     for s in range(len(obs)):
         seed = int(rng.integers(2**63))
         rows = np.flatnonzero(data.label_state == s)
         for k in rows:
-            _, actions[k] = apply(data.obs[s], int(data.label_action[k]), seed)
+            actions[k] = apply(data.obs[s], int(data.label_action[k]), seed)[1]
         if teacher[s] >= 0:
-            _, teacher[s] = apply(data.obs[s], int(teacher[s]), seed)
-        obs[s] = apply(data.obs[s], 0, seed)[0]
-    return LabelledStates(obs, data.label_state, actions, data.label_invalid, data.label_value, teacher)
+            teacher[s] = apply(data.obs[s], int(teacher[s]), seed)[1]
+        obs[s], _, mask = apply(data.obs[s], 0, seed, full if masks is None else masks[s])
+        if masks is not None:
+            masks[s] = mask
+    packed = None if masks is None else np.packbits(masks, axis=1)
+    return LabelledStates(obs, data.label_state, actions, data.label_invalid, data.label_value, teacher, packed)
 
 
 def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
                       value: th.Tensor, teacher: th.Tensor, margin: float = 1.0,
-                      weights: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> tuple[th.Tensor, dict[str, float]]:
+                      weights: tuple[float, float, float] = (1.0, 1.0, 1.0),
+                      masks: th.Tensor | None = None) -> tuple[th.Tensor, dict[str, float]]:
     """The loss of a batch (module docstring): ``q_maps`` (B, n_actions) with gradients, labels indexing
-    its rows; ``teacher`` (B,) with -1 where a state has none. Returns the loss and its terms."""
+    its rows; ``teacher`` (B,) with -1 where a state has none; ``masks`` (B, n_actions) bool, the allowed
+    actions the teacher term ranges over (None: the labelled actions). Returns the loss and its terms."""
     qa = q_maps[label_state, label_action]
     zero = q_maps.sum() * 0.0
     known = ~th.isnan(value)
@@ -131,7 +152,15 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
         is_teacher = label_action == teacher[label_state]
         bonus = qa + margin * (~is_teacher).float()
         rows = th.unique(label_state[has_teacher & is_teacher])
-        if len(rows):
+        if len(rows) and masks is not None:  # over every allowed action of the state
+            q_rows = q_maps[rows]
+            t = teacher[rows]
+            allowed = masks[rows].clone()
+            allowed[th.arange(len(rows)), t] = True
+            bonus_all = th.where(allowed, q_rows + margin, th.full_like(q_rows, -th.inf))
+            bonus_all[th.arange(len(rows)), t] = q_rows[th.arange(len(rows)), t]
+            teacher_loss = (bonus_all.max(dim=1).values - q_rows[th.arange(len(rows)), t]).mean()
+        elif len(rows):
             member = label_state[None, :] == rows[:, None]  # (R, K)
             best = th.where(member, bonus[None, :], th.full_like(bonus[None, :], -th.inf)).max(dim=1).values
             q_teacher = q_maps[rows, teacher[rows]]
@@ -143,35 +172,45 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
 
 def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: float,
                weights: tuple[float, float, float]) -> tuple[th.Tensor, dict[str, float], th.Tensor, LabelledStates]:
-    """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network, with the
-    Q-values of their labelled actions and the subset they index."""
+    """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network, with their
+    Q-maps (flat) and the subset they index."""
     sub = data.subset(states)
     device = policy.device
     q = policy.q_net.q_maps(policy.images(th.as_tensor(sub.obs, device=device))).flatten(1)
     label_state = th.as_tensor(sub.label_state, device=device)
     label_action = th.as_tensor(sub.label_action, device=device)
+    masks = sub.unpacked_masks(q.shape[1])
     loss, parts = distillation_loss(q, label_state, label_action, th.as_tensor(sub.label_invalid, device=device),
                                     th.as_tensor(sub.label_value, dtype=th.float32, device=device),
-                                    th.as_tensor(sub.teacher_action, device=device), margin, weights)
-    return loss, parts, q[label_state, label_action], sub
+                                    th.as_tensor(sub.teacher_action, device=device), margin, weights,
+                                    None if masks is None else th.as_tensor(masks, device=device))
+    return loss, parts, q, sub
 
 
 def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
              weights: tuple[float, float, float] = (1.0, 1.0, 1.0), chunk: int = 32) -> dict[str, float]:
     """The mean loss and its terms over every state of ``data`` (no gradients), and how often the
     network's best labelled action of a state is one that ended the episode invalid (``invalid_choice``:
-    the greedy choice among the labelled actions)."""
+    the greedy choice among the labelled actions) and, where the states carry masks, how often its masked
+    argmax over every action is the teacher's action (``teacher_choice``)."""
     totals: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0}
-    invalid_choices = chosen = 0
+    invalid_choices = chosen = agree = taught = 0
     policy.set_training_mode(False)
     with th.no_grad():
         for start in range(0, len(data.obs), chunk):
             states = np.arange(start, min(start + chunk, len(data.obs)))
-            loss, parts, q_labels, sub = batch_loss(policy, data, states, margin, weights)
+            loss, parts, q_maps, sub = batch_loss(policy, data, states, margin, weights)
             totals["loss"] += float(loss) * len(states)
             for key, v in parts.items():
                 totals[key] += v * len(states)
-            qa = q_labels.cpu().numpy()
+            q_np = q_maps.cpu().numpy()
+            qa = q_np[sub.label_state, sub.label_action]
+            masks = sub.unpacked_masks(q_np.shape[1])
+            if masks is not None:
+                has = sub.teacher_action >= 0
+                greedy = np.where(masks, q_np, -np.inf).argmax(axis=1)
+                agree += int((greedy[has] == sub.teacher_action[has]).sum())
+                taught += int(has.sum())
             for s in range(len(states)):
                 rows = np.flatnonzero(sub.label_state == s)
                 if len(rows):
@@ -179,7 +218,10 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
                     chosen += 1
     out = {k: v / max(len(data.obs), 1) for k, v in totals.items()}
     out["invalid_choice"] = invalid_choices / max(chosen, 1)
+    if taught:
+        out["teacher_choice"] = agree / taught
     return out
+
 
 def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
             weights: tuple[float, float, float] = (1.0, 1.0, 1.0), seed: int = 0,

@@ -95,14 +95,20 @@ class FlipWidth:
         if rng.random() < 0.5:
             return obs, action, next_obs, next_mask
         r, c = divmod(int(action), 20)
-        return obs[..., ::-1].copy(), r * 20 + 19 - c, next_obs[..., ::-1].copy(), next_mask
+        flipped_mask = np.asarray(next_mask).reshape(12, 20)[:, ::-1].reshape(-1)
+        return obs[..., ::-1].copy(), r * 20 + 19 - c, next_obs[..., ::-1].copy(), flipped_mask
 
 
 def test_augmentation_moves_a_states_labels_and_teacher_with_its_observation() -> None:
     from sb3_pixeldqn.distill import augmented
 
     _, data = crafted(n_states=40)
+    left_half = np.zeros((40, 12, 20), bool)
+    left_half[:, :, :10] = True
+    data = LabelledStates(data.obs, data.label_state, data.label_action, data.label_invalid, data.label_value,
+                          data.teacher_action, np.packbits(left_half.reshape(40, -1), axis=1))
     out = augmented(data, [FlipWidth()], 240, np.random.default_rng(0))
+    masks = out.unpacked_masks(240).reshape(40, 12, 20)
     flipped = [s for s in range(40) if not np.array_equal(out.obs[s], data.obs[s])]
     assert 5 < len(flipped) < 35  # about half the states were drawn flipped
     for s in range(40):
@@ -113,7 +119,9 @@ def test_augmentation_moves_a_states_labels_and_teacher_with_its_observation() -
             assert np.array_equal(out.obs[s], data.obs[s][..., ::-1])
             assert np.array_equal(out.label_action[rows], r * 20 + 19 - c)
             assert out.teacher_action[s] == tr * 20 + 19 - tc
+            assert masks[s, :, 10:].all() and not masks[s, :, :10].any()  # the mask moved with it
         else:
+            assert np.array_equal(masks[s], left_half[s])
             assert np.array_equal(out.label_action[rows], data.label_action[rows])
             assert out.teacher_action[s] == data.teacher_action[s]
     assert np.array_equal(out.label_invalid, data.label_invalid) and np.array_equal(out.label_state, data.label_state)
@@ -123,3 +131,18 @@ def test_augmentation_moves_a_states_labels_and_teacher_with_its_observation() -
     th.manual_seed(0)
     history = distill(model, data.subset(np.arange(16)), epochs=30, batch_states=8, augment=[FlipWidth()])
     assert history[-1]["loss"] < history[0]["loss"]
+
+
+def test_with_masks_the_teacher_margin_spans_every_allowed_action() -> None:
+    # one state, four actions; labels on 0 (the teacher's) and 1; action 2 unlabelled but allowed and valued high,
+    # action 3 higher still but not allowed
+    q = th.tensor([[1.0, 0.0, 3.0, 9.0]], requires_grad=True)
+    args = (th.tensor([0, 0]), th.tensor([0, 1]), th.tensor([False, False]), th.tensor([np.nan, np.nan]),
+            th.tensor([0]))
+    _, over_labels = distillation_loss(q, *args, margin=1.0)
+    masks = th.tensor([[True, True, True, False]])
+    loss, over_masks = distillation_loss(q, *args, margin=1.0, masks=masks)
+    assert over_labels["teacher"] == pytest.approx(0.0)  # 1 >= 0 + margin among the labelled actions
+    assert over_masks["teacher"] == pytest.approx(3.0)  # (3 + 1) - 1: the allowed unlabelled action counts
+    loss.backward()
+    assert q.grad[0, 2] > 0 and q.grad[0, 0] < 0 and q.grad[0, 3] == 0  # pushed down, up, untouched

@@ -59,6 +59,7 @@ from sb3_pixeldqn.distill import LabelledStates
 from shelf_env import params
 from shelf_env.actions import PRIMITIVES
 from shelf_env.baselines.heuristics import ObservationView
+from shelf_env.camera.heightmap import observation_masks
 from shelf_env.env import DYNAMICS_VERSION
 from shelf_env.files import write_atomically
 from shelf_env.policies import POLICIES, masked_greedy
@@ -318,10 +319,13 @@ def replay_states(shard: Shard, max_labels: int | None = None) -> tuple[int, int
     return len(a["obs"]), checked, mismatches
 
 
-def labelled_states(shards: Sequence[Shard], invalid_reward: float = params.REWARD_INVALID) -> LabelledStates:
+def labelled_states(shards: Sequence[Shard], invalid_reward: float = params.REWARD_INVALID,
+                    masks: bool = True) -> LabelledStates:
     """The shards' states and labels in `sb3_pixeldqn.distill`'s form: an action that ended the episode
     invalid has the value ``invalid_reward``, one that sorted the scene ``params.REWARD_SORTED`` (both
-    terminal, exact), any other an unknown value (NaN); the teacher's choice is the teacher action."""
+    terminal, exact), any other an unknown value (NaN); the teacher's choice is the teacher action.
+    ``masks``: each state's allowed actions, read from its observation (`observation_masks`, the env's
+    own), so that distillation's teacher term ranges over the greedy policy's whole choice set."""
     parts = []
     offset = 0
     for shard in shards:
@@ -329,12 +333,17 @@ def labelled_states(shards: Sequence[Shard], invalid_reward: float = params.REWA
         value = np.full(len(a["label_action"]), np.nan, np.float32)
         value[~a["label_valid"]] = invalid_reward
         value[a["label_success"]] = params.REWARD_SORTED
+        layout_ = shard.meta["layout"]
+        packed = np.packbits(np.stack([observation_masks(o, layout_["pixel_size"], layout_["map_names"])
+                                       for o in a["obs"]]), axis=1) if masks and len(a["obs"]) else None
         parts.append((a["obs"], a["label_state"] + offset, a["label_action"], ~a["label_valid"], value,
-                      a["teacher_action"]))
+                      a["teacher_action"], packed))
         offset += len(a["obs"])
     if not parts:
         raise ValueError("no shards to take labelled states from")
-    return LabelledStates(*(np.concatenate([p[i] for p in parts]) for i in range(6)))
+    columns = [np.concatenate([p[i] for p in parts]) for i in range(6)]
+    stacked = [p[6] for p in parts if p[6] is not None]
+    return LabelledStates(*columns, masks=np.concatenate(stacked) if masks and stacked else None)
 
 
 @dataclass
