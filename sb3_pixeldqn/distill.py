@@ -12,12 +12,20 @@ A labelled state (`LabelledStates`): an observation and any number of labelled a
 - ``value``: its exact value where the action ends the episode (the invalid reward, or the reward of
   reaching the goal), NaN where the label does not know it;
 
+- ``progress`` (optional): a score of what the action achieved where it kept the episode going (for
+  a shelf: the change in the number of sorted objects);
+
 and, optionally, the teacher's action in that state (one of its labelled actions). The loss of a
-batch of states is the sum of three terms, each over every labelled pixel:
+batch of states is the sum of four terms, each over every labelled pixel:
 
 - **value**: Huber(Q(s, a), value) on the labels with a known value;
 - **ranking**: every action that kept the episode valid is valued at least ``margin`` above every
   action that ended it invalid, in the same state: mean relu(Q(s, a_inv) + margin − Q(s, a_ok));
+- **progress**: among the actions of one state that kept the episode valid, one with a higher
+  ``progress`` is valued at least ``margin`` above one with a lower: mean relu(Q(s, a_lo) + margin −
+  Q(s, a_hi)). It is what tells a step that sorts an object from a valid step that changes nothing
+  useful (picking an object already in its region and putting it back there), which the other
+  terms leave level: without it a distilled policy can avoid every fall and still loop;
 - **teacher**: the large-margin loss of demonstrations on the teacher's action: max_a [Q(s, a) +
   margin·(a ≠ a_T)] − Q(s, a_T), over every action the state's mask allows where the states carry
   masks (``masks``: the greedy policy's own choice set, so the teacher's action is taught to be its
@@ -50,6 +58,8 @@ class LabelledStates:
     teacher_action: np.ndarray  # (S,) int, -1 where none
     #: (S, ceil(n_actions / 8)) uint8: each state's allowed actions, ``np.packbits`` along axis 1; None: no masks
     masks: np.ndarray | None = None
+    #: (K,) float: each label's progress score (see the module docstring); None: no progress term
+    label_progress: np.ndarray | None = None
     _index: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False, compare=False)
 
     def check(self, obs_shape: tuple[int, ...], n_actions: int) -> None:
@@ -68,6 +78,8 @@ class LabelledStates:
             raise ValueError(f"labelled states: a labelled action outside [0, {n_actions})")
         if (self.teacher_action >= n_actions).any():
             raise ValueError(f"labelled states: a teacher action outside [0, {n_actions})")
+        if self.label_progress is not None and len(self.label_progress) != k:
+            raise ValueError("labelled states: label_progress needs one entry per label")
         if self.masks is not None and self.masks.shape != (len(self.obs), (n_actions + 7) // 8):
             raise ValueError(f"labelled states: masks of shape {self.masks.shape}, expected "
                              f"{(len(self.obs), (n_actions + 7) // 8)} (packed bits of {n_actions} actions per state)")
@@ -96,7 +108,8 @@ class LabelledStates:
         rows = np.concatenate([order[starts[i]:starts[i + 1]] for i in states]) if len(states) else order[:0]
         return LabelledStates(self.obs[states], np.repeat(np.arange(len(states)), counts), self.label_action[rows],
                               self.label_invalid[rows], self.label_value[rows], self.teacher_action[states],
-                              None if self.masks is None else self.masks[states])
+                              None if self.masks is None else self.masks[states],
+                              None if self.label_progress is None else self.label_progress[rows])
 
 def augmented(data: LabelledStates, transforms: Sequence[Any], n_actions: int,
               rng: np.random.Generator) -> LabelledStates:
@@ -129,16 +142,20 @@ def augmented(data: LabelledStates, transforms: Sequence[Any], n_actions: int,
         if masks is not None:
             masks[s] = mask
     packed = None if masks is None else np.packbits(masks, axis=1)
-    return LabelledStates(obs, data.label_state, actions, data.label_invalid, data.label_value, teacher, packed)
+    return LabelledStates(obs, data.label_state, actions, data.label_invalid, data.label_value, teacher, packed,
+                          data.label_progress)
 
 
 def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
                       value: th.Tensor, teacher: th.Tensor, margin: float = 1.0,
-                      weights: tuple[float, float, float] = (1.0, 1.0, 1.0),
-                      masks: th.Tensor | None = None) -> tuple[th.Tensor, dict[str, float]]:
+                      weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0),
+                      masks: th.Tensor | None = None,
+                      progress: th.Tensor | None = None) -> tuple[th.Tensor, dict[str, float]]:
     """The loss of a batch (module docstring): ``q_maps`` (B, n_actions) with gradients, labels indexing
     its rows; ``teacher`` (B,) with -1 where a state has none; ``masks`` (B, n_actions) bool, the allowed
-    actions the teacher term ranges over (None: the labelled actions). Returns the loss and its terms."""
+    actions the teacher term ranges over (None: the labelled actions); ``progress`` (K,) the labels' progress
+    scores (None: no progress term). ``weights``: of the value, ranking, teacher and progress terms.
+    Returns the loss and its terms."""
     qa = q_maps[label_state, label_action]
     zero = q_maps.sum() * 0.0
     known = ~th.isnan(value)
@@ -146,6 +163,11 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
     same = label_state[:, None] == label_state[None, :]
     pairs = same & ~invalid[:, None] & invalid[None, :]  # (valid row, invalid column) of one state
     ranking = F.relu(qa[None, :] + margin - qa[:, None])[pairs].mean() if pairs.any() else zero
+    progress_loss = zero
+    if progress is not None:
+        ahead = same & ~invalid[:, None] & ~invalid[None, :] & (progress[:, None] > progress[None, :])
+        if ahead.any():  # (higher row, lower column) of one state, both valid
+            progress_loss = F.relu(qa[None, :] + margin - qa[:, None])[ahead].mean()
     has_teacher = teacher[label_state] >= 0
     teacher_loss = zero
     if has_teacher.any():
@@ -165,13 +187,14 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
             best = th.where(member, bonus[None, :], th.full_like(bonus[None, :], -th.inf)).max(dim=1).values
             q_teacher = q_maps[rows, teacher[rows]]
             teacher_loss = (best - q_teacher).mean()
-    loss = weights[0] * value_loss + weights[1] * ranking + weights[2] * teacher_loss
+    w = tuple(weights) + (1.0,) * (4 - len(weights))
+    loss = w[0] * value_loss + w[1] * ranking + w[2] * teacher_loss + w[3] * progress_loss
     return loss, {"value": float(value_loss.detach()), "ranking": float(ranking.detach()),
-                  "teacher": float(teacher_loss.detach())}
+                  "teacher": float(teacher_loss.detach()), "progress": float(progress_loss.detach())}
 
 
 def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: float,
-               weights: tuple[float, float, float]) -> tuple[th.Tensor, dict[str, float], th.Tensor, LabelledStates]:
+               weights: tuple[float, ...]) -> tuple[th.Tensor, dict[str, float], th.Tensor, LabelledStates]:
     """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network, with their
     Q-maps (flat) and the subset they index."""
     sub = data.subset(states)
@@ -183,17 +206,19 @@ def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: fl
     loss, parts = distillation_loss(q, label_state, label_action, th.as_tensor(sub.label_invalid, device=device),
                                     th.as_tensor(sub.label_value, dtype=th.float32, device=device),
                                     th.as_tensor(sub.teacher_action, device=device), margin, weights,
-                                    None if masks is None else th.as_tensor(masks, device=device))
+                                    None if masks is None else th.as_tensor(masks, device=device),
+                                    None if sub.label_progress is None else
+                                    th.as_tensor(sub.label_progress, dtype=th.float32, device=device))
     return loss, parts, q, sub
 
 
 def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
-             weights: tuple[float, float, float] = (1.0, 1.0, 1.0), chunk: int = 32) -> dict[str, float]:
+             weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0), chunk: int = 32) -> dict[str, float]:
     """The mean loss and its terms over every state of ``data`` (no gradients), and how often the
     network's best labelled action of a state is one that ended the episode invalid (``invalid_choice``:
     the greedy choice among the labelled actions) and, where the states carry masks, how often its masked
     argmax over every action is the teacher's action (``teacher_choice``)."""
-    totals: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0}
+    totals: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0, "progress": 0.0}
     invalid_choices = chosen = agree = taught = 0
     policy.set_training_mode(False)
     with th.no_grad():
@@ -224,7 +249,7 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
 
 
 def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
-            weights: tuple[float, float, float] = (1.0, 1.0, 1.0), seed: int = 0,
+            weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0), seed: int = 0,
             augment: Sequence[Any] = ()) -> list[dict[str, float]]:
     """Train ``model``'s online Q-network (a `PixelDoubleDQN`) on ``data`` for ``epochs`` passes with its own
     optimiser, then copy it to the target network. ``augment``: transforms each batch's states are drawn
@@ -238,7 +263,7 @@ def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int
     history = []
     for _ in range(epochs):
         policy.set_training_mode(True)
-        sums: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0}
+        sums: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0, "progress": 0.0}
         order = rng.permutation(len(data.obs))
         for start in range(0, len(order), batch_states):
             batch = data.subset(order[start:start + batch_states])

@@ -146,3 +146,16 @@ def test_with_masks_the_teacher_margin_spans_every_allowed_action() -> None:
     assert over_masks["teacher"] == pytest.approx(3.0)  # (3 + 1) - 1: the allowed unlabelled action counts
     loss.backward()
     assert q.grad[0, 2] > 0 and q.grad[0, 0] < 0 and q.grad[0, 3] == 0  # pushed down, up, untouched
+
+
+def test_the_progress_term_ranks_valid_actions_by_what_they_achieved() -> None:
+    # one state: 0 sorted an object (+1), 1 changed nothing useful (0), 2 dropped one (invalid, not ranked here)
+    q = th.tensor([[0.0, 0.5, 3.0]], requires_grad=True)
+    args = (th.tensor([0, 0, 0]), th.tensor([0, 1, 2]), th.tensor([False, False, True]), th.full((3,), np.nan),
+            th.tensor([-1]))
+    _, without = distillation_loss(q, *args, margin=1.0)
+    loss, parts = distillation_loss(q, *args, margin=1.0, progress=th.tensor([1.0, 0.0, 5.0]))
+    assert without["progress"] == 0.0
+    assert parts["progress"] == pytest.approx(1.5)  # relu(0.5 + 1 - 0); the invalid action's score is ignored
+    loss.backward()
+    assert q.grad[0, 0] < 0 < q.grad[0, 1]  # the sorting step pushed up, the useless one down

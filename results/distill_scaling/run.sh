@@ -16,20 +16,20 @@ for n in 220 440 all; do
   [ "$n" != all ] && extra=(--max-states "$n")
   if [ ! -f "$MODELS/p_s_d$n.zip" ]; then
     "$PY" -m shelf_env.training.distill --data data/teacher --max-shards 35 "${extra[@]}" \
-      --init examples/pretrained/p_s.zip --out "$MODELS/p_s_d$n.zip" --epochs 8 --val-fraction 0.2 --no-augment --teacher-over labelled
+      --init examples/pretrained/p_s.zip --out "$MODELS/p_s_d$n.zip" --epochs 8 --val-fraction 0.2 --no-augment --teacher-over labelled --no-progress
   fi
   cp "$MODELS/p_s_d$n.distill.json" "$DIR/p_s_d$n.distill.json"
 done
 # all states again, each batch drawn through the model's own augmentation (mirror, class permutation)
 if [ ! -f "$MODELS/p_s_dall_aug.zip" ]; then
   "$PY" -m shelf_env.training.distill --data data/teacher --max-shards 35 \
-    --init examples/pretrained/p_s.zip --out "$MODELS/p_s_dall_aug.zip" --epochs 8 --val-fraction 0.2 --teacher-over labelled
+    --init examples/pretrained/p_s.zip --out "$MODELS/p_s_dall_aug.zip" --epochs 8 --val-fraction 0.2 --teacher-over labelled --no-progress
 fi
 cp "$MODELS/p_s_dall_aug.distill.json" "$DIR/p_s_dall_aug.distill.json"
 # and with the teacher's margin over every allowed action of a state (the defaults)
 if [ ! -f "$MODELS/p_s_dall_aug_m.zip" ]; then
   "$PY" -m shelf_env.training.distill --data data/teacher --max-shards 35 \
-    --init examples/pretrained/p_s.zip --out "$MODELS/p_s_dall_aug_m.zip" --epochs 8 --val-fraction 0.2
+    --init examples/pretrained/p_s.zip --out "$MODELS/p_s_dall_aug_m.zip" --epochs 8 --val-fraction 0.2 --no-progress
 fi
 cp "$MODELS/p_s_dall_aug_m.distill.json" "$DIR/p_s_dall_aug_m.distill.json"
 "$PY" -m shelf_env.evaluation.falls examples/pretrained/p_s.zip "$MODELS/p_s_dall_aug.zip" \

@@ -320,12 +320,14 @@ def replay_states(shard: Shard, max_labels: int | None = None) -> tuple[int, int
 
 
 def labelled_states(shards: Sequence[Shard], invalid_reward: float = params.REWARD_INVALID,
-                    masks: bool = True) -> LabelledStates:
+                    masks: bool = True, progress: bool = True) -> LabelledStates:
     """The shards' states and labels in `sb3_pixeldqn.distill`'s form: an action that ended the episode
     invalid has the value ``invalid_reward``, one that sorted the scene ``params.REWARD_SORTED`` (both
     terminal, exact), any other an unknown value (NaN); the teacher's choice is the teacher action.
     ``masks``: each state's allowed actions, read from its observation (`observation_masks`, the env's
-    own), so that distillation's teacher term ranges over the greedy policy's whole choice set."""
+    own), so that distillation's teacher term ranges over the greedy policy's whole choice set.
+    ``progress``: each label's change in the number of sorted objects is its progress score (a step that
+    sorts an object ranks above one that changes nothing useful)."""
     parts = []
     offset = 0
     for shard in shards:
@@ -337,13 +339,14 @@ def labelled_states(shards: Sequence[Shard], invalid_reward: float = params.REWA
         packed = np.packbits(np.stack([observation_masks(o, layout_["pixel_size"], layout_["map_names"])
                                        for o in a["obs"]]), axis=1) if masks and len(a["obs"]) else None
         parts.append((a["obs"], a["label_state"] + offset, a["label_action"], ~a["label_valid"], value,
-                      a["teacher_action"], packed))
+                      a["teacher_action"], packed, a["label_dsorted"].astype(np.float32)))
         offset += len(a["obs"])
     if not parts:
         raise ValueError("no shards to take labelled states from")
     columns = [np.concatenate([p[i] for p in parts]) for i in range(6)]
     stacked = [p[6] for p in parts if p[6] is not None]
-    return LabelledStates(*columns, masks=np.concatenate(stacked) if masks and stacked else None)
+    return LabelledStates(*columns, masks=np.concatenate(stacked) if masks and stacked else None,
+                          label_progress=np.concatenate([p[7] for p in parts]) if progress else None)
 
 
 @dataclass

@@ -13,8 +13,10 @@ states of the training scenes only, for a scaling curve. Each batch's states are
 model's own augmentation (``model.augment``: the shipped P+S's mirror and class permutation, exact
 symmetries of the cabinet) unless ``--no-augment``. The teacher term's margin ranges over every action
 a state's mask allows (read from its observation), so that the teacher's action becomes the greedy
-argmax, unless ``--teacher-over labelled`` (its labelled actions only). The model is saved atomically (an SB3 zip
-that `PixelDoubleDQN.load` and ``shelf-train --init-from`` take); the report goes beside it as JSON.
+argmax, unless ``--teacher-over labelled`` (its labelled actions only); the progress term ranks a
+state's valid actions by the change in sorted objects they made, unless ``--no-progress``. The model
+is saved atomically (an SB3 zip that `PixelDoubleDQN.load` and ``shelf-train --init-from`` take); the
+report goes beside it as JSON.
 """
 
 from __future__ import annotations
@@ -53,10 +55,11 @@ def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[li
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
         max_states: int | None = None, batch_states: int = 16, margin: float = 1.0,
         learning_rate: float | None = None, seed: int = 0, max_shards: int | None = None,
-        augment: bool = True, masks: bool = True) -> dict[str, Any]:
+        augment: bool = True, masks: bool = True, progress: bool = True) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
     draw each batch's states through the model's own augmentation (its exact symmetries), as its training did.
-    ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions)."""
+    ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions).
+    ``progress``: the progress term ranks a state's valid actions by the objects they sorted."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     if epochs < 1 or not 0 <= val_fraction < 1:
@@ -73,7 +76,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
             len(stored["map_names"]) != model.policy.n_maps:
         raise ValueError(f"{init} takes observations {list(model.observation_space.shape)} and {model.policy.n_maps} "
                          f"maps; the dataset's are {stored['obs_shape']} and {stored['map_names']}")
-    labelled = dataset.labelled_states(shards, masks=masks)
+    labelled = dataset.labelled_states(shards, masks=masks, progress=progress)
     train_idx, val_idx = split_by_scene(shards, val_fraction)
     if max_states is not None:
         train_idx = train_idx[:max_states]
@@ -96,7 +99,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     report = {"data": str(data), "shards": [s.path.name for s in shards], "init": init, "out": str(out),
               "train_states": len(train.obs),
               "train_labels": len(train.label_action), "val_states": 0 if val is None else len(val.obs),
-              "epochs": epochs, "augment": [repr(t) for t in transforms], "masks": masks,
+              "epochs": epochs, "augment": [repr(t) for t in transforms], "masks": masks, "progress": progress,
               "seconds": round(time.monotonic() - start, 1), "history": history}
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
@@ -119,11 +122,13 @@ def main(argv: list[str] | None = None) -> int:
                    "through the model's own augmentation)")
     p.add_argument("--teacher-over", choices=("masked", "labelled"), default="masked", help="the actions the "
                    "teacher's margin ranges over: every allowed action of the state, or its labelled actions only")
+    p.add_argument("--no-progress", action="store_true", help="leave out the progress term (valid actions ranked "
+                   "by the objects they sorted)")
     args = p.parse_args(argv)
     try:
         run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
             args.margin, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
-            masks=args.teacher_over == "masked")
+            masks=args.teacher_over == "masked", progress=not args.no_progress)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2
