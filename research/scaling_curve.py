@@ -29,36 +29,48 @@ def load(folder: pathlib.Path) -> tuple[dict[str, dict[str, Any]], list[dict[str
     return reports, cells
 
 
+def recipe(report: dict[str, Any]) -> str:
+    """A distillation's recipe in words, from its report (older reports lack the later options)."""
+    parts = ["augmented" if report.get("augment") else "as stored",
+             "teacher over allowed actions" if report.get("masks") else "teacher over labels"]
+    if report.get("progress"):
+        parts.append("progress")
+    return ", ".join(parts)
+
+
 def rows(reports: dict[str, dict[str, Any]], cells: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """One row per policy: its training states (0 for the starting model, None for a reference),
-    its distillation's last validation loss, and per N the fall cell's numbers."""
+    """One row per policy: its training states (0 for the starting model, None for a reference), its
+    distillation's recipe and last validation loss, and per N the fall cell's numbers. A distilled
+    model under a test-time wrapper (``zip+loop-breaker``) is a row of its own, off the curves."""
     starts = {r["init"] for r in reports.values()}
     out: dict[str, dict[str, Any]] = {}
     for cell in cells:
         policy = cell["policy"]
-        stem = pathlib.Path(policy).stem if policy.endswith(".zip") else policy
-        row = out.setdefault(policy, {"policy": stem, "states": None, "val_loss": None, "augmented": False,
-                                      "by_n": {}})
+        name, _, wrapper = policy.partition("+")
+        stem = pathlib.Path(name).stem if name.endswith(".zip") else name
+        row = out.setdefault(policy, {"policy": stem + (f"+{wrapper}" if wrapper else ""), "states": None,
+                                      "val_loss": None, "recipe": None, "wrapped": bool(wrapper), "by_n": {}})
         if stem in reports:
             row["states"] = reports[stem]["train_states"]
-            row["augmented"] = bool(reports[stem].get("augment"))
             row["val_loss"] = reports[stem]["history"][-1]["val"]["loss"]
-        elif policy in starts:
+            row["recipe"] = recipe(reports[stem])
+        elif name in starts:
             row["states"] = 0
-            first = next(r for r in reports.values() if r["init"] == policy)["history"][0]
+            first = next(r for r in reports.values() if r["init"] == name)["history"][0]
             row["val_loss"] = first["val"]["loss"]
         row["by_n"][cell["num_objects"]] = cell
-    return sorted(out.values(), key=lambda r: (r["states"] is None, r["states"] or 0, r["augmented"]))
+    return sorted(out.values(), key=lambda r: (r["states"] is None, r["recipe"] or "", r["states"] or 0,
+                                               r["wrapped"]))
 
 
 def table(data: list[dict[str, Any]]) -> str:
     ns = sorted({n for r in data for n in r["by_n"]})
-    head = ["policy", "states distilled", "augmented", "val loss"] + \
+    head = ["policy", "states distilled", "recipe", "val loss"] + \
         [f"invalid / fell per action, N = {n}" for n in ns] + [f"SR N = {n}" for n in ns]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in data:
         cells = [r["policy"], "-" if r["states"] is None else str(r["states"]),
-                 "-" if r["states"] is None else ("yes" if r["augmented"] else "no"),
+                 r["recipe"] or "-",
                  "-" if r["val_loss"] is None else f"{r['val_loss']:.2f}"]
         for n in ns:
             c = r["by_n"].get(n)
@@ -78,16 +90,21 @@ def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
     import matplotlib.pyplot as plt
 
     ns = sorted({n for r in data for n in r["by_n"]})
-    curve = [r for r in data if r["states"] is not None and not r["augmented"]]
-    extra = [r for r in data if r["augmented"]]  # off the curve: another recipe at one of its sizes
+    start = [r for r in data if r["states"] == 0 and not r["wrapped"]]
+    recipes = sorted({r["recipe"] for r in data if r["recipe"] is not None})
+    extra = [r for r in data if r["wrapped"] and r["states"] is not None]
     refs = [r for r in data if r["states"] is None]
-    fig, (ax_f, ax_s) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (ax_f, ax_s) = plt.subplots(1, 2, figsize=(11, 4.5))
+    styles = ["o-", "s--", "^:", "d-."]
     for i, n in enumerate(ns):
-        pts = [(r["states"], r["by_n"][n]) for r in curve if n in r["by_n"]]
         colour = f"C{i}"
-        ax_f.plot([p[0] for p in pts], [100 * c["invalid_rate"] for _, c in pts], "o-", color=colour,
-                  label=f"N = {n}")
-        ax_s.plot([p[0] for p in pts], [c["sr"] for _, c in pts], "o-", color=colour, label=f"N = {n}")
+        for j, name in enumerate(recipes):  # each recipe's curve starts at the starting model
+            curve = start + [r for r in data if r["recipe"] == name and not r["wrapped"]]
+            pts = [(r["states"], r["by_n"][n]) for r in curve if n in r["by_n"]]
+            label = f"N = {n}, {name}"
+            ax_f.plot([p[0] for p in pts], [100 * c["invalid_rate"] for _, c in pts], styles[j % 4], color=colour,
+                      label=label)
+            ax_s.plot([p[0] for p in pts], [c["sr"] for _, c in pts], styles[j % 4], color=colour, label=label)
         for r in extra:
             if n in r["by_n"]:
                 ax_f.plot([r["states"]], [100 * r["by_n"][n]["invalid_rate"]], "*", ms=12, color=colour)
@@ -100,10 +117,10 @@ def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
              title="invalid actions per greedy action")
     ax_s.set(xlabel="training states distilled", ylabel="SR (%)", title="greedy SR")
     names = ", ".join(r["policy"] for r in refs)
-    title = "distillation scaling" + (f" (dashed: {names})" if refs else "") + \
-        (" (stars: with augmentation)" if extra else "")
+    title = "distillation scaling" + (f" (horizontal: {names})" if refs else "") + \
+        (f" (stars: {', '.join(sorted({r['policy'].partition('+')[2] for r in extra}))})" if extra else "")
     fig.suptitle(title)
-    ax_f.legend()
+    ax_f.legend(fontsize=7)
     fig.tight_layout()
     png.parent.mkdir(parents=True, exist_ok=True)
     tmp = png.with_name(f".{png.name}.partial")

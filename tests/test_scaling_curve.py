@@ -19,19 +19,23 @@ def test_the_curve_orders_models_by_states_and_keeps_references_apart(tmp_path: 
     start = "examples/pretrained/p_s.zip"
     for stem, states, loss, augment in (("p_s_d100", 100, 5.0, []), ("p_s_d50", 50, 6.0, []),
                                         ("p_s_d100_aug", 100, 4.0, ["MirrorWidth(...)"])):
-        report = {"init": start, "train_states": states, "augment": augment,
+        report = {"init": start, "train_states": states, "augment": augment, "masks": bool(augment),
+                  "progress": bool(augment),
                   "history": [{"epoch": 0, "val": {"loss": 9.0}}, {"epoch": 1, "val": {"loss": loss}}]}
         (tmp_path / f"{stem}.distill.json").write_text(json.dumps(report))
     cells = [cell(start, 8, 100, 20, 1), cell("runs/p_s_d100.zip", 8, 100, 5, 3),
              cell("runs/p_s_d50.zip", 8, 100, 10, 2), cell("h-d", 8, 80, 4, 2),
-             cell("runs/p_s_d100_aug.zip", 8, 100, 2, 4)]
+             cell("runs/p_s_d100_aug.zip", 8, 100, 2, 4), cell("runs/p_s_d100_aug.zip+loop-breaker", 8, 100, 1, 4)]
     (tmp_path / "falls.json").write_text(json.dumps({str(i): c for i, c in enumerate(cells)}))
     data = scaling_curve.rows(*scaling_curve.load(tmp_path))
     assert [(r["policy"], r["states"], r["val_loss"]) for r in data] == [
-        ("p_s", 0, 9.0), ("p_s_d50", 50, 6.0), ("p_s_d100", 100, 5.0), ("p_s_d100_aug", 100, 4.0), ("h-d", None, None)]
+        ("p_s", 0, 9.0), ("p_s_d50", 50, 6.0), ("p_s_d100", 100, 5.0), ("p_s_d100_aug", 100, 4.0),
+        ("p_s_d100_aug+loop-breaker", 100, 4.0), ("h-d", None, None)]
     text = scaling_curve.table(data)
-    assert "| p_s_d100_aug | 100 | yes | 4.00 | 2.0 % / 2.0 % (2/100) | 100 % (4) |" in text
-    assert "| p_s_d100 | 100 | no | 5.00 | 5.0 % / 5.0 % (5/100) | 75 % (4) |" in text
+    assert data[4]["wrapped"] and not data[3]["wrapped"]
+    assert "| p_s_d100_aug | 100 | augmented, teacher over allowed actions, progress | 4.00 |" \
+        " 2.0 % / 2.0 % (2/100) | 100 % (4) |" in text
+    assert "| p_s_d100 | 100 | as stored, teacher over labels | 5.00 | 5.0 % / 5.0 % (5/100) | 75 % (4) |" in text
     assert "| h-d | - | - | - | 5.0 % / 5.0 % (4/80) | 50 % (4) |" in text
     png = tmp_path / "curve.png"
     assert scaling_curve.main([str(tmp_path), "--png", str(png)]) == 0
