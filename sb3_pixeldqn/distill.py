@@ -250,26 +250,44 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
 
 def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
             weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0), seed: int = 0,
-            augment: Sequence[Any] = ()) -> list[dict[str, float]]:
+            augment: Sequence[Any] = (), anchor: float = 0.0,
+            anchor_net: th.nn.Module | None = None) -> list[dict[str, float]]:
     """Train ``model``'s online Q-network (a `PixelDoubleDQN`) on ``data`` for ``epochs`` passes with its own
     optimiser, then copy it to the target network. ``augment``: transforms each batch's states are drawn
-    through (`augmented`; ``model.augment`` for the model's own). Returns each epoch's mean training loss
-    and terms."""
+    through (`augmented`; ``model.augment`` for the model's own). ``anchor`` > 0 adds that weight times
+    the **anchor** term: Huber(Q(s, a), Q_0(s, a)) over every allowed action of a state that no label
+    covers, Q_0 being ``anchor_net`` (a frozen copy of the starting Q-network, e.g. made once before the
+    first call): the labels move the actions they speak of, the rest of the map keeps what the
+    starting model had learned (which objects to move, in which order). Returns each epoch's mean
+    training loss and terms."""
     policy = model.policy
     data.check(tuple(model.observation_space.shape), int(model.action_space.n))
     if epochs < 1 or batch_states < 1:
         raise ValueError(f"epochs and batch_states must be >= 1, got {epochs} and {batch_states}")
+    if anchor < 0 or (anchor > 0 and anchor_net is None):
+        raise ValueError(f"anchor must be >= 0, and > 0 only with an anchor_net; got {anchor} and {anchor_net!r:.40}")
     rng = np.random.default_rng(seed)
     history = []
     for _ in range(epochs):
         policy.set_training_mode(True)
-        sums: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0, "progress": 0.0}
+        sums: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0, "progress": 0.0,
+                                  "anchor": 0.0}
         order = rng.permutation(len(data.obs))
         for start in range(0, len(order), batch_states):
             batch = data.subset(order[start:start + batch_states])
             batch = augmented(batch, augment, int(model.action_space.n), rng)
             states = np.arange(len(batch.obs))
-            loss, parts, _, _ = batch_loss(policy, batch, states, margin, weights)
+            loss, parts, q, sub = batch_loss(policy, batch, states, margin, weights)
+            if anchor > 0:
+                assert anchor_net is not None
+                with th.no_grad():
+                    q0 = anchor_net.q_maps(policy.images(th.as_tensor(sub.obs, device=policy.device))).flatten(1)
+                masks = sub.unpacked_masks(q.shape[1])
+                free = th.ones_like(q, dtype=th.bool) if masks is None else th.as_tensor(masks, device=q.device)
+                free[th.as_tensor(sub.label_state), th.as_tensor(sub.label_action)] = False
+                anchor_loss = F.smooth_l1_loss(q[free], q0[free]) if free.any() else q.sum() * 0.0
+                loss = loss + anchor * anchor_loss
+                parts["anchor"] = float(anchor_loss.detach())
             policy.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             policy.optimizer.step()

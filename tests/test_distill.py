@@ -159,3 +159,28 @@ def test_the_progress_term_ranks_valid_actions_by_what_they_achieved() -> None:
     assert parts["progress"] == pytest.approx(1.5)  # relu(0.5 + 1 - 0); the invalid action's score is ignored
     loss.backward()
     assert q.grad[0, 0] < 0 < q.grad[0, 1]  # the sorting step pushed up, the useless one down
+
+
+def test_the_anchor_keeps_unlabelled_actions_at_the_starting_values() -> None:
+    import copy
+
+    drift = {}
+    for anchor in (0.0, 10.0):
+        th.manual_seed(0)
+        model, data = crafted()
+        start = copy.deepcopy(model.q_net).requires_grad_(False)
+        obs = th.as_tensor(data.obs)
+        with th.no_grad():
+            q0 = start.q_maps(model.policy.images(obs)).flatten(1)
+        history = distill(model, data, epochs=20, batch_states=8, anchor=anchor, anchor_net=start if anchor else None)
+        with th.no_grad():
+            q1 = model.q_net.q_maps(model.policy.images(obs)).flatten(1)
+        free = th.ones_like(q0, dtype=th.bool)
+        free[th.as_tensor(data.label_state), th.as_tensor(data.label_action)] = False
+        drift[anchor] = float((q1 - q0)[free].abs().mean())
+        assert history[-1]["loss"] < history[0]["loss"]
+        assert ("anchor" in history[-1]) and (history[-1]["anchor"] > 0) == (anchor > 0)
+    assert drift[10.0] < 0.5 * drift[0.0]
+    model, data = crafted(4)
+    with pytest.raises(ValueError, match="anchor_net"):
+        distill(model, data, anchor=1.0)

@@ -22,6 +22,7 @@ report goes beside it as JSON.
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import pathlib
 import sys
@@ -55,11 +56,12 @@ def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[li
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
         max_states: int | None = None, batch_states: int = 16, margin: float = 1.0,
         learning_rate: float | None = None, seed: int = 0, max_shards: int | None = None,
-        augment: bool = True, masks: bool = True, progress: bool = True) -> dict[str, Any]:
+        augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
     draw each batch's states through the model's own augmentation (its exact symmetries), as its training did.
     ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions).
-    ``progress``: the progress term ranks a state's valid actions by the objects they sorted."""
+    ``progress``: the progress term ranks a state's valid actions by the objects they sorted. ``anchor``:
+    the weight that keeps unlabelled allowed actions at the starting model's values (0: none)."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     if epochs < 1 or not 0 <= val_fraction < 1:
@@ -83,6 +85,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     train: LabelledStates = labelled.subset(np.array(train_idx))
     val = labelled.subset(np.array(val_idx)) if val_idx else None
     transforms = list(model.augment) if augment else []
+    anchor_net = copy.deepcopy(model.q_net).requires_grad_(False) if anchor > 0 else None
     start = time.monotonic()
     history: list[dict[str, Any]] = []
     if val is not None:  # the starting model, for comparison
@@ -90,7 +93,8 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         print(json.dumps(history[-1]), flush=True)
     for epoch in range(epochs):
         row: dict[str, Any] = {"epoch": epoch + 1, "train": distill(model, train, 1, batch_states, margin,
-                                                                     seed=seed + epoch, augment=transforms)[0]}
+                                                                     seed=seed + epoch, augment=transforms,
+                                                                     anchor=anchor, anchor_net=anchor_net)[0]}
         if val is not None:
             row["val"] = evaluate(model.policy, val, margin)
         history.append(row)
@@ -100,6 +104,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "train_states": len(train.obs),
               "train_labels": len(train.label_action), "val_states": 0 if val is None else len(val.obs),
               "epochs": epochs, "augment": [repr(t) for t in transforms], "masks": masks, "progress": progress,
+              "anchor": anchor,
               "seconds": round(time.monotonic() - start, 1), "history": history}
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
@@ -124,11 +129,14 @@ def main(argv: list[str] | None = None) -> int:
                    "teacher's margin ranges over: every allowed action of the state, or its labelled actions only")
     p.add_argument("--no-progress", action="store_true", help="leave out the progress term (valid actions ranked "
                    "by the objects they sorted)")
+    p.add_argument("--anchor", type=float, default=0.0, help="weight of the term that keeps unlabelled allowed "
+                   "actions at the starting model's values (0: none)")
     args = p.parse_args(argv)
     try:
         run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
             args.margin, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
-            masks=args.teacher_over == "masked", progress=not args.no_progress)
+            masks=args.teacher_over == "masked", progress=not args.no_progress,
+            anchor=args.anchor)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2
