@@ -41,7 +41,8 @@ def recipe(report: dict[str, Any]) -> str:
 def rows(reports: dict[str, dict[str, Any]], cells: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per policy: its training states (0 for the starting model, None for a reference), its
     distillation's recipe and last validation loss, and per N the fall cell's numbers. A distilled
-    model under a test-time wrapper (``zip+loop-breaker``) is a row of its own, off the curves."""
+    model under a test-time wrapper (``zip+loop-breaker``) is a row of its own, off the curves; a zip with
+    no distillation report (e.g. a fine-tune of a distilled model) is in the table only."""
     starts = {r["init"] for r in reports.values()}
     out: dict[str, dict[str, Any]] = {}
     for cell in cells:
@@ -49,7 +50,8 @@ def rows(reports: dict[str, dict[str, Any]], cells: list[dict[str, Any]]) -> lis
         name, _, wrapper = policy.partition("+")
         stem = pathlib.Path(name).stem if name.endswith(".zip") else name
         row = out.setdefault(policy, {"policy": stem + (f"+{wrapper}" if wrapper else ""), "states": None,
-                                      "val_loss": None, "recipe": None, "wrapped": bool(wrapper), "by_n": {}})
+                                      "val_loss": None, "recipe": None, "wrapped": bool(wrapper),
+                                      "zip": name.endswith(".zip"), "by_n": {}})
         if stem in reports:
             row["states"] = reports[stem]["train_states"]
             row["val_loss"] = reports[stem]["history"][-1]["val"]["loss"]
@@ -93,7 +95,7 @@ def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
     start = [r for r in data if r["states"] == 0 and not r["wrapped"]]
     recipes = sorted({r["recipe"] for r in data if r["recipe"] is not None})
     extra = [r for r in data if r["wrapped"] and r["states"] is not None]
-    refs = [r for r in data if r["states"] is None]
+    refs = [r for r in data if r["states"] is None and not r["zip"]]  # named policies (the heuristics)
     fig, (ax_f, ax_s) = plt.subplots(1, 2, figsize=(11, 4.5))
     styles = ["o-", "s--", "^:", "d-."]
     for i, n in enumerate(ns):

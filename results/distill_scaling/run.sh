@@ -1,39 +1,55 @@
 #!/usr/bin/env bash
-# The scaling curve of distillation (docs/experiments/distill-scaling.md): the shipped P+S distilled from the
-# first 220, 440 and all training states of the dataset's first 35 shards (70 scenes; the last 20 % of the
-# scenes are the distillation's validation states), then each model's greedy fall rate per action and SR at
-# N = 5, 8, 11 on validation scenes (evaluation seed 2000, YCB), beside the shipped P+S and H-d.
-#   bash results/distill_scaling/run.sh            # distil (about 2 min) and measure (about 40 min, resumable)
+# Distilling the teacher dataset into the shipped P+S (docs/experiments/distill-scaling.md): four recipes,
+# each from the first 220, 440 and all training states of the dataset's first 35 shards (70 scenes; the
+# last 20 % of the scenes are the distillation's validation states), then each model's greedy actions
+# that would end the episode invalid, per action, and its greedy SR at N = 8, 5, 11 on validation scenes
+# (evaluation seed 2000, YCB), beside the shipped P+S and H-d.
+#   bash results/distill_scaling/run.sh     # distil (2-3 min a model, one thread) and measure (resumable)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 PY=${PYTHON:-.venv/bin/python}
 DIR=results/distill_scaling
-MODELS=runs/distill_scaling
-mkdir -p "$MODELS"
-for n in 220 440 all; do
-  extra=()
-  [ "$n" != all ] && extra=(--max-states "$n")
-  if [ ! -f "$MODELS/p_s_d$n.zip" ]; then
+M=runs/distill_scaling
+mkdir -p "$M"
+
+distil() {  # NAME STATES OPTIONS...: STATES "all" or a number of training states
+  local name=$1 states=$2
+  shift 2
+  local extra=()
+  [ "$states" != all ] && extra=(--max-states "$states")
+  if [ ! -f "$M/$name.zip" ]; then
     "$PY" -m shelf_env.training.distill --data data/teacher --max-shards 35 "${extra[@]}" \
-      --init examples/pretrained/p_s.zip --out "$MODELS/p_s_d$n.zip" --epochs 8 --val-fraction 0.2 --no-augment --teacher-over labelled --no-progress
+      --init examples/pretrained/p_s.zip --out "$M/$name.zip" --epochs 8 --val-fraction 0.2 "$@"
   fi
-  cp "$MODELS/p_s_d$n.distill.json" "$DIR/p_s_d$n.distill.json"
+  cp "$M/$name.distill.json" "$DIR/$name.distill.json"
+}
+
+for n in 220 440 all; do
+  # A: the states as stored, the teacher's margin over its labelled actions (the first loss)
+  distil "p_s_d$n" "$n" --no-augment --teacher-over labelled --no-progress
+  # D: + augmentation, the margin over every allowed action, the progress term, the anchor
+  distil "p_s_d${n}_aug_mpa" "$n" --anchor 1.0
 done
-# all states again, each batch drawn through the model's own augmentation (mirror, class permutation)
-if [ ! -f "$MODELS/p_s_dall_aug.zip" ]; then
-  "$PY" -m shelf_env.training.distill --data data/teacher --max-shards 35 \
-    --init examples/pretrained/p_s.zip --out "$MODELS/p_s_dall_aug.zip" --epochs 8 --val-fraction 0.2 --teacher-over labelled --no-progress
+for n in 220 440; do  # C without the anchor
+  distil "p_s_d${n}_aug_mp" "$n"
+done
+distil p_s_dall_aug all --teacher-over labelled --no-progress  # A + augmentation
+distil p_s_dall_aug_m all --no-progress                         # + the margin over every allowed action
+distil p_s_dall_aug_mp all                                      # C: + the progress term
+
+# B + 45 min of PixelDoubleDQN with the dataset as demonstrations (the data/teacher of the time: 37 shards)
+if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then
+  bash results/distill_finetune/train.sh 0.75 "$M/p_s_dall_aug_m.zip" runs/distill_finetune
+  cp runs/distill_finetune/model.zip "$M/p_s_dall_aug_m_ft45.zip"
 fi
-cp "$MODELS/p_s_dall_aug.distill.json" "$DIR/p_s_dall_aug.distill.json"
-# and with the teacher's margin over every allowed action of a state (the defaults)
-if [ ! -f "$MODELS/p_s_dall_aug_m.zip" ]; then
-  "$PY" -m shelf_env.training.distill --data data/teacher --max-shards 35 \
-    --init examples/pretrained/p_s.zip --out "$MODELS/p_s_dall_aug_m.zip" --epochs 8 --val-fraction 0.2 --no-progress
-fi
-cp "$MODELS/p_s_dall_aug_m.distill.json" "$DIR/p_s_dall_aug_m.distill.json"
-"$PY" -m shelf_env.evaluation.falls examples/pretrained/p_s.zip "$MODELS/p_s_dall_aug.zip" \
-  "$MODELS/p_s_dall_aug_m.zip" h-d \
-  "$MODELS/p_s_dall.zip" "$MODELS/p_s_d440.zip" "$MODELS/p_s_d220.zip" --ns 8 5 11 --runs 10 --seed 2000 \
-  --out "$DIR/falls.json"
+
+ps=examples/pretrained/p_s.zip
+"$PY" -m shelf_env.evaluation.falls "$ps" "$M/p_s_dall_aug_m_ft45.zip" "$M/p_s_dall_aug_mpa.zip" \
+  "$M/p_s_dall_aug_mpa.zip+loop-breaker" "$ps+loop-breaker" "$M/p_s_d440_aug_mpa.zip" "$M/p_s_d220_aug_mpa.zip" \
+  "$M/p_s_dall_aug_mp.zip" "$M/p_s_dall_aug_mp.zip+loop-breaker" "$M/p_s_d440_aug_mp.zip" "$M/p_s_d220_aug_mp.zip" \
+  h-d "$M/p_s_dall_aug.zip" "$M/p_s_dall_aug_m.zip" "$M/p_s_dall.zip" "$M/p_s_d440.zip" "$M/p_s_d220.zip" \
+  --ns 8 --runs 10 --seed 2000 --out "$DIR/falls.json"
+"$PY" -m shelf_env.evaluation.falls "$ps" "$M/p_s_dall_aug_mpa.zip" "$M/p_s_dall_aug_mpa.zip+loop-breaker" \
+  "$ps+loop-breaker" h-d --ns 5 11 --runs 10 --seed 2000 --out "$DIR/falls.json"
 "$PY" research/scaling_curve.py "$DIR" --out "$DIR/report.md" --png "$DIR/scaling.png"

@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# The distilled P+S on held-out scenes (docs/experiments/distill-scaling.md): the §V comparison's YCB scenes
+# (issue 10's grid: seed 0, 30 runs) at N = 5, 8, 11, open loop, beside the shipped P+S, S, H-d and H-a
+# (their cells reused from results/models) and the shipped P+S with the same test-time loop breaker.
+# No choice of this work read these scenes (the recipes were chosen on evaluation seed 2000).
+#   bash results/distill_test/run.sh [--workers 2]     # resumable cell by cell
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+[ -f runs/distill_scaling/p_s_dall_aug_mpa.zip ] || bash results/distill_scaling/run.sh
+d=runs/distill_scaling/p_s_dall_aug_mpa.zip
+ps=examples/pretrained/p_s.zip
+.venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
+  --ns 5 8 11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --reuse-cells results/models "$@"
