@@ -35,6 +35,8 @@ def recipe(report: dict[str, Any]) -> str:
              "teacher over allowed actions" if report.get("masks") else "teacher over labels"]
     if report.get("progress"):
         parts.append("progress")
+    if report.get("anchor"):
+        parts.append(f"anchor {report['anchor']:g}")
     return ", ".join(parts)
 
 
@@ -93,20 +95,25 @@ def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
 
     ns = sorted({n for r in data for n in r["by_n"]})
     start = [r for r in data if r["states"] == 0 and not r["wrapped"]]
-    recipes = sorted({r["recipe"] for r in data if r["recipe"] is not None})
+    counts: dict[str, int] = {}
+    for r in data:
+        if r["recipe"] is not None and not r["wrapped"]:
+            counts[r["recipe"]] = counts.get(r["recipe"], 0) + 1
+    recipes = sorted(name for name, k in counts.items() if k >= 2)  # curves; single models: the table only
     extra = [r for r in data if r["wrapped"] and r["states"] is not None]
     refs = [r for r in data if r["states"] is None and not r["zip"]]  # named policies (the heuristics)
-    fig, (ax_f, ax_s) = plt.subplots(1, 2, figsize=(11, 4.5))
+    fig, (ax_f, ax_s) = plt.subplots(1, 2, figsize=(11, 5))
     styles = ["o-", "s--", "^:", "d-."]
     for i, n in enumerate(ns):
         colour = f"C{i}"
         for j, name in enumerate(recipes):  # each recipe's curve starts at the starting model
             curve = start + [r for r in data if r["recipe"] == name and not r["wrapped"]]
             pts = [(r["states"], r["by_n"][n]) for r in curve if n in r["by_n"]]
-            label = f"N = {n}, {name}"
-            ax_f.plot([p[0] for p in pts], [100 * c["invalid_rate"] for _, c in pts], styles[j % 4], color=colour,
-                      label=label)
-            ax_s.plot([p[0] for p in pts], [c["sr"] for _, c in pts], styles[j % 4], color=colour, label=label)
+            if len(pts) < 2:
+                continue
+            ax_f.plot([p[0] for p in pts], [100 * c["invalid_rate"] for _, c in pts], styles[j % 4], color=colour)
+            ax_s.plot([p[0] for p in pts], [c["sr"] for _, c in pts], styles[j % 4], color=colour)
+        ax_f.plot([], [], "-", color=colour, label=f"N = {n}")
         for r in extra:
             if n in r["by_n"]:
                 ax_f.plot([r["states"]], [100 * r["by_n"][n]["invalid_rate"]], "*", ms=12, color=colour)
@@ -115,6 +122,8 @@ def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
             if n in ref["by_n"]:
                 ax_f.axhline(100 * ref["by_n"][n]["invalid_rate"], color=colour, ls="--", lw=1)
                 ax_s.axhline(ref["by_n"][n]["sr"], color=colour, ls="--", lw=1)
+    for j, name in enumerate(recipes):
+        ax_s.plot([], [], styles[j % 4], color="black", label=name)
     ax_f.set(xlabel="training states distilled", ylabel="greedy actions ending the episode invalid (%)",
              title="invalid actions per greedy action")
     ax_s.set(xlabel="training states distilled", ylabel="SR (%)", title="greedy SR")
@@ -122,7 +131,8 @@ def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
     title = "distillation scaling" + (f" (horizontal: {names})" if refs else "") + \
         (f" (stars: {', '.join(sorted({r['policy'].partition('+')[2] for r in extra}))})" if extra else "")
     fig.suptitle(title)
-    ax_f.legend(fontsize=7)
+    ax_f.legend(fontsize=8)
+    ax_s.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.15))
     fig.tight_layout()
     png.parent.mkdir(parents=True, exist_ok=True)
     tmp = png.with_name(f".{png.name}.partial")

@@ -10,4 +10,8 @@ cd "$(dirname "$0")/../.."
 d=runs/distill_scaling/p_s_dall_aug_mpa.zip
 ps=examples/pretrained/p_s.zip
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
-  --ns 5 8 11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --reuse-cells results/models "$@"
+  --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --reuse-cells results/models "$@"
+# the greedy action's invalid actions per action on the first 10 of those scenes at N = 8, each action tried
+# first in a copy of the simulator (shelf_env.evaluation.falls)
+.venv/bin/python -m shelf_env.evaluation.falls "$ps" "$d" "$d+loop-breaker" h-d --ns 8 --runs 10 --seed 0 \
+  --out results/distill_test/falls.json
