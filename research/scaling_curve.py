@@ -16,6 +16,7 @@ import json
 import pathlib
 from typing import Any
 
+from shelf_env.evaluation.falls import FallEpisode, cell_summary
 from shelf_env.files import write_text_atomically
 
 
@@ -24,6 +25,9 @@ def load(folder: pathlib.Path) -> tuple[dict[str, dict[str, Any]], list[dict[str
     reports = {p.name.removesuffix(".distill.json"): json.loads(p.read_text())
                for p in sorted(folder.glob("*.distill.json"))}
     cells = list(json.loads((folder / "falls.json").read_text()).values())
+    for cell in cells:  # the summary of this version (cells measured before it lack the newer numbers)
+        cell.update(cell_summary([FallEpisode(**e) for e in cell.get("per_episode", [])]) if "per_episode" in cell
+                    else {})
     if not cells:
         raise ValueError(f"{folder}/falls.json holds no cells")
     return reports, cells
@@ -70,7 +74,7 @@ def rows(reports: dict[str, dict[str, Any]], cells: list[dict[str, Any]]) -> lis
 def table(data: list[dict[str, Any]]) -> str:
     ns = sorted({n for r in data for n in r["by_n"]})
     head = ["policy", "states distilled", "recipe", "val loss"] + \
-        [f"invalid / fell per action, N = {n}" for n in ns] + [f"SR N = {n}" for n in ns]
+        [f"invalid / fell per action (episodes with one), N = {n}" for n in ns] + [f"SR N = {n}" for n in ns]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in data:
         cells = [r["policy"], "-" if r["states"] is None else str(r["states"]),
@@ -79,7 +83,8 @@ def table(data: list[dict[str, Any]]) -> str:
         for n in ns:
             c = r["by_n"].get(n)
             cells.append("-" if c is None else f"{100 * c['invalid_rate']:.1f} % / {100 * c['fall_rate']:.1f} % "
-                                               f"({c['invalid']}/{c['decisions']})")
+                                               f"({c['invalid']}/{c['decisions']}; "
+                                               f"{c.get('episodes_invalid', '?')}/{c['episodes']} ep.)")
         for n in ns:
             c = r["by_n"].get(n)
             cells.append("-" if c is None else f"{c['sr']:.0f} % ({c['episodes']})")

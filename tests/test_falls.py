@@ -38,7 +38,8 @@ def test_the_summary_counts_per_action(measured: list[falls.FallEpisode]) -> Non
     assert s["sr"] == pytest.approx(100 * sum(e.greedy_success for e in measured) / RUNS)
     crafted = [falls.FallEpisode(0, 10, 2, 1, False, 3), falls.FallEpisode(1, 5, 0, 0, True, -1)]
     assert falls.cell_summary(crafted) == {"episodes": 2, "decisions": 15, "invalid": 2, "fell": 1,
-                                           "invalid_rate": 2 / 15, "fall_rate": 1 / 15, "sr": 50.0}
+                                           "invalid_rate": 2 / 15, "fall_rate": 1 / 15, "episodes_invalid": 1,
+                                           "median_episode_rate": 0.1, "sr": 50.0}
 
 
 def test_measure_resumes_from_its_file(tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -11,7 +11,8 @@ from shelf_env.evaluation import falls
 def cell(policy: str, n: int, decisions: int, invalid: int, sorted_: int) -> dict:
     episodes = [falls.FallEpisode(r, decisions // 4, 0, 0, r < sorted_, -1) for r in range(4)]
     summary = falls.cell_summary(episodes) | {"decisions": decisions, "invalid": invalid, "fell": invalid,
-                                             "invalid_rate": invalid / decisions, "fall_rate": invalid / decisions}
+                                             "invalid_rate": invalid / decisions, "fall_rate": invalid / decisions,
+                                             "episodes_invalid": min(invalid, 4)}
     return {"policy": policy, "num_objects": n, "seed": 2000, "object_set": "ycb", **summary}
 
 
@@ -34,9 +35,10 @@ def test_the_curve_orders_models_by_states_and_keeps_references_apart(tmp_path: 
     text = scaling_curve.table(data)
     assert data[4]["wrapped"] and not data[3]["wrapped"]
     assert "| p_s_d100_aug | 100 | augmented, teacher over allowed actions, progress | 4.00 |" \
-        " 2.0 % / 2.0 % (2/100) | 100 % (4) |" in text
-    assert "| p_s_d100 | 100 | as stored, teacher over labels | 5.00 | 5.0 % / 5.0 % (5/100) | 75 % (4) |" in text
-    assert "| h-d | - | - | - | 5.0 % / 5.0 % (4/80) | 50 % (4) |" in text
+        " 2.0 % / 2.0 % (2/100; 2/4 ep.) | 100 % (4) |" in text
+    assert "| p_s_d100 | 100 | as stored, teacher over labels | 5.00 | 5.0 % / 5.0 % (5/100; 4/4 ep.) |" \
+        " 75 % (4) |" in text
+    assert "| h-d | - | - | - | 5.0 % / 5.0 % (4/80; 4/4 ep.) | 50 % (4) |" in text
     png = tmp_path / "curve.png"
     assert scaling_curve.main([str(tmp_path), "--png", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

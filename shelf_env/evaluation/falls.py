@@ -110,13 +110,21 @@ def measure_cell(policy: str, num_objects: int, seed: int, runs: int, object_set
 
 
 def cell_summary(episodes: list[FallEpisode]) -> dict[str, Any]:
-    """Decisions, invalid and fallen actions, the rates per action, and the greedy SR (%)."""
+    """Decisions, invalid and fallen actions, the rates per action, the greedy SR (%), and two numbers
+    that one stuck episode cannot dominate: the episodes with an invalid greedy action at all
+    (``episodes_invalid``: those the greedy policy itself would have lost to it) and the median over
+    episodes of each one's invalid rate. A policy that, rescued, keeps choosing the same falling
+    action piles up to 40 invalid actions in one scene: the pooled rate then says more about that
+    scene than about the policy."""
     decisions = sum(e.decisions for e in episodes)
     invalid = sum(e.invalid for e in episodes)
     fell = sum(e.fell for e in episodes)
+    rates = [e.invalid / e.decisions for e in episodes if e.decisions]
     return {"episodes": len(episodes), "decisions": decisions, "invalid": invalid, "fell": fell,
             "invalid_rate": invalid / decisions if decisions else float("nan"),
             "fall_rate": fell / decisions if decisions else float("nan"),
+            "episodes_invalid": sum(e.invalid > 0 for e in episodes),
+            "median_episode_rate": float(np.median(rates)) if rates else float("nan"),
             "sr": 100.0 * sum(e.greedy_success for e in episodes) / len(episodes) if episodes else float("nan")}
 
 
