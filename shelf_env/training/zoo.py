@@ -36,6 +36,7 @@ from shelf_env.training.config import (
     collect_demonstrations,
     demo_policy,
     env_codec,
+    load_demonstration_data,
     make_callbacks,
     make_env,
 )
@@ -166,6 +167,8 @@ class RecipeCallback(BaseCallback):
         model.augment = augmentations(config, env_codec(self.training_env))
         buffer = model.replay_buffer
         assert isinstance(buffer, HindsightRelabelReplayBuffer)
+        if config.demo_data is not None and buffer.demonstrations is None:  # the teacher dataset's transitions
+            load_demonstration_data(model, config, log=lambda line: print(line, flush=True) if self.verbose else None)
         if config.demo_policy is not None and buffer.demonstrations is None and config.demo_steps > 0:
             if config.demo_policy in SIMULATOR_DEMOS:  # it probes the env it acts in: the training env itself
                 envs = getattr(self.training_env, "envs", None)
