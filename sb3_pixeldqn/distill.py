@@ -251,7 +251,7 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
 def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
             weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0), seed: int = 0,
             augment: Sequence[Any] = (), anchor: float = 0.0,
-            anchor_net: th.nn.Module | None = None) -> list[dict[str, float]]:
+            anchor_net: Any = None) -> list[dict[str, float]]:
     """Train ``model``'s online Q-network (a `PixelDoubleDQN`) on ``data`` for ``epochs`` passes with its own
     optimiser, then copy it to the target network. ``augment``: transforms each batch's states are drawn
     through (`augmented`; ``model.augment`` for the model's own). ``anchor`` > 0 adds that weight times

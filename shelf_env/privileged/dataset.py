@@ -343,9 +343,11 @@ def labelled_states(shards: Sequence[Shard], invalid_reward: float = params.REWA
         offset += len(a["obs"])
     if not parts:
         raise ValueError("no shards to take labelled states from")
-    columns = [np.concatenate([p[i] for p in parts]) for i in range(6)]
+    obs, label_state, label_action, invalid, values, teacher = (np.concatenate([p[i] for p in parts])
+                                                                for i in range(6))
     stacked = [p[6] for p in parts if p[6] is not None]
-    return LabelledStates(*columns, masks=np.concatenate(stacked) if masks and stacked else None,
+    return LabelledStates(obs, label_state, label_action, invalid, values, teacher,
+                          masks=np.concatenate(stacked) if masks and stacked else None,
                           label_progress=np.concatenate([p[7] for p in parts]) if progress else None)
 
 
@@ -396,10 +398,10 @@ def transitions(shards: Sequence[Shard], invalid_reward: float = params.REWARD_I
                 continue
             expert = action == int(a["teacher_action"][i])
             if a["label_valid"][k] and not a["label_success"][k]:
-                nxt = key.get((int(a["state_episode"][i]), int(a["state_step"][i]) + 1))
-                if nxt is not None:
+                after = key.get((int(a["state_episode"][i]), int(a["state_step"][i]) + 1))
+                if after is not None:
                     reward = params.REWARD_STEP + progress_reward * int(a["label_dsorted"][k])
-                    rows.append((i, nxt, action, reward, False, expert))
+                    rows.append((i, after, action, reward, False, expert))
         for k in range(len(a["label_action"])):
             valid, success = bool(a["label_valid"][k]), bool(a["label_success"][k])
             if valid and not success:
