@@ -25,7 +25,6 @@ again).
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import pathlib
 import sys
@@ -38,15 +37,16 @@ from sb3_pixeldqn.loop_breaker import predict_takes
 from shelf_env import params
 from shelf_env.evaluation.protocol import (
     check_ns,
-    is_named,
+    greedy_action,
     make_env,
     make_policy,
-    policy_file,
+    policy_digest,
     scene_seed,
     takes_action_masks,
 )
 from shelf_env.files import write_json_atomically
 from shelf_env.policies import POLICIES
+from shelf_env.privileged.lookahead import probe_step
 
 #: Evaluation seed of the scenes distilled models are compared on (the scaling curve, the choice of a
 #: model to ship): a validation set. Final claims use the §V seeds 0..S-1, which no choice reads.
@@ -72,17 +72,12 @@ def measure_episode(env: Any, policy: Any, rescue: Any, reset_seed: int, run: in
                     max_actions: int = params.MAX_ACTIONS) -> FallEpisode:
     """Play ``policy`` greedily from the scene of ``reset_seed``, probing each of its actions first
     (module docstring)."""
-    from shelf_env.privileged.lookahead import probe_step
-
     masked, starts = takes_action_masks(policy), predict_takes(policy, "episode_start")
     obs, _ = env.reset(seed=reset_seed)
     decisions = invalid = fell = 0
     first_invalid = -1
     while True:
-        kwargs: dict[str, Any] = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
-        if starts:
-            kwargs["episode_start"] = np.array([decisions == 0])
-        action = int(np.asarray(policy.predict(obs, deterministic=True, **kwargs)[0]).reshape(-1)[0])
+        action = greedy_action(env, policy, obs, decisions == 0, masked, starts)
         outcome = probe_step(env, action)
         if not outcome.valid:
             invalid += 1
@@ -129,12 +124,10 @@ def cell_summary(episodes: list[FallEpisode]) -> dict[str, Any]:
 
 
 def cell_key(policy: str, num_objects: int, seed: int, runs: int, object_set: str) -> str:
-    """A cell's key in the results file; a zip's names the first 12 hex digits of its SHA-256."""
-    if is_named(policy):
-        tag = policy
-    else:
-        digest = hashlib.sha256(pathlib.Path(policy_file(policy)).read_bytes()).hexdigest()[:12]
-        tag = f"{policy}@{digest}"
+    """A cell's key in the results file; a checkpoint's names the first 12 hex digits of the SHA-256 of
+    the files it reads (`protocol.policy_digest`, as the evaluation's cells record it)."""
+    digest = policy_digest(policy)
+    tag = f"{policy}@{digest[:12]}" if digest else policy
     return f"{tag}|{object_set}|N={num_objects}|seed={seed}|runs={runs}"
 
 

@@ -127,6 +127,17 @@ def takes_action_masks(policy: Any) -> bool:
     return bool(getattr(policy, "acts_masked", True)) and predict_takes(policy, "action_masks")
 
 
+def greedy_action(env: gym.Env, policy: Any, obs: Any, first: bool, masked: bool, starts: bool) -> int:
+    """``policy``'s greedy action in ``obs`` as an evaluation asks for it: with the env's masks when
+    it acts masked (`takes_action_masks`), with SB3's ``episode_start`` (``first``) when its
+    ``predict`` takes it (``starts``)."""
+    kwargs: dict[str, Any] = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
+    if starts:
+        kwargs["episode_start"] = np.array([first])
+    action, _ = policy.predict(obs, deterministic=True, **kwargs)
+    return int(np.asarray(action).reshape(-1)[0])
+
+
 def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = params.MAX_ACTIONS) -> dict:
     """Roll out ``policy`` greedily from the scene of ``reset_seed``; success needs < ``max_actions`` actions.
 
@@ -143,11 +154,7 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
     masked, starts = takes_action_masks(policy), predict_takes(policy, "episode_start")
     noops, repeat, max_repeat, last = 0, 0, 0, None
     while True:
-        kwargs: dict[str, Any] = {"action_masks": env.get_wrapper_attr("action_masks")()} if masked else {}
-        if starts:
-            kwargs["episode_start"] = np.array([last is None])
-        action, _ = policy.predict(obs, deterministic=True, **kwargs)
-        action = int(np.asarray(action).reshape(-1)[0])
+        action = greedy_action(env, policy, obs, last is None, masked, starts)
         next_obs, _, terminated, truncated, info = env.step(action)
         noops += unchanged(obs, next_obs)
         repeat = repeat + 1 if action == last else 1
@@ -326,6 +333,13 @@ def fingerprint_path(out: pathlib.Path, policy: str) -> pathlib.Path:
     return out / "cells" / f"{policy_label(policy)}.sha256"
 
 
+def policy_digest(policy: str) -> str:
+    """The sha256 of the files a checkpoint policy reads (`shelf_env.policies.policy_files`: the
+    checkpoint and its wrappers' own files, their bytes together); "" for a registered name."""
+    files = policy_files(policy)
+    return hashlib.sha256(b"".join(f.read_bytes() for f in files)).hexdigest() if files else ""
+
+
 def check_cell_owner(out: pathlib.Path, policies: list[str], record: bool = False) -> None:
     """Cells are keyed by the policy's label, a checkpoint's file stem; make sure a label stands for
     one file. Two checkpoints with one stem in ``policies`` are refused, and so is a checkpoint whose
@@ -341,8 +355,7 @@ def check_cell_owner(out: pathlib.Path, policies: list[str], record: bool = Fals
         if seen.setdefault(label, policy) != policy:
             raise ValueError(f"checkpoints {seen[label]} and {policy} share the label {label!r} (the file stem) "
                              "that names their cells: rename one")
-        files = policy_files(policy)
-        digest = hashlib.sha256(b"".join(f.read_bytes() for f in files)).hexdigest()
+        digest = policy_digest(policy)
         path = fingerprint_path(out, policy)
         if path.exists():
             before = path.read_text().strip()
