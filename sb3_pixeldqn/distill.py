@@ -45,6 +45,10 @@ import numpy as np
 import torch as th
 import torch.nn.functional as F
 
+#: Weights of the value, ranking, teacher and progress terms.
+Weights = tuple[float, float, float, float]
+DEFAULT_WEIGHTS: Weights = (1.0, 1.0, 1.0, 1.0)
+
 
 @dataclass
 class LabelledStates:
@@ -131,10 +135,10 @@ def augmented(data: LabelledStates, transforms: Sequence[Any], n_actions: int,
             o, action, _, mask = transform(o, action, o, mask, draw)
         return o, int(action), mask
 
+    order, starts = data.labels_of()
     for s in range(len(obs)):
         seed = int(rng.integers(2**63))
-        rows = np.flatnonzero(data.label_state == s)
-        for k in rows:
+        for k in order[starts[s]:starts[s + 1]]:
             actions[k] = apply(data.obs[s], int(data.label_action[k]), seed)[1]
         if teacher[s] >= 0:
             teacher[s] = apply(data.obs[s], int(teacher[s]), seed)[1]
@@ -148,7 +152,7 @@ def augmented(data: LabelledStates, transforms: Sequence[Any], n_actions: int,
 
 def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
                       value: th.Tensor, teacher: th.Tensor, margin: float = 1.0,
-                      weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0),
+                      weights: Weights = DEFAULT_WEIGHTS,
                       masks: th.Tensor | None = None,
                       progress: th.Tensor | None = None) -> tuple[th.Tensor, dict[str, float]]:
     """The loss of a batch (module docstring): ``q_maps`` (B, n_actions) with gradients, labels indexing
@@ -187,14 +191,14 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
             best = th.where(member, bonus[None, :], th.full_like(bonus[None, :], -th.inf)).max(dim=1).values
             q_teacher = q_maps[rows, teacher[rows]]
             teacher_loss = (best - q_teacher).mean()
-    w = tuple(weights) + (1.0,) * (4 - len(weights))
-    loss = w[0] * value_loss + w[1] * ranking + w[2] * teacher_loss + w[3] * progress_loss
+    w_value, w_ranking, w_teacher, w_progress = weights
+    loss = w_value * value_loss + w_ranking * ranking + w_teacher * teacher_loss + w_progress * progress_loss
     return loss, {"value": float(value_loss.detach()), "ranking": float(ranking.detach()),
                   "teacher": float(teacher_loss.detach()), "progress": float(progress_loss.detach())}
 
 
 def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: float,
-               weights: tuple[float, ...]) -> tuple[th.Tensor, dict[str, float], th.Tensor, LabelledStates]:
+               weights: Weights) -> tuple[th.Tensor, dict[str, float], th.Tensor, LabelledStates]:
     """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network, with their
     Q-maps (flat) and the subset they index."""
     sub = data.subset(states)
@@ -213,7 +217,7 @@ def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: fl
 
 
 def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
-             weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0), chunk: int = 32) -> dict[str, float]:
+             weights: Weights = DEFAULT_WEIGHTS, chunk: int = 32) -> dict[str, float]:
     """The mean loss and its terms over every state of ``data`` (no gradients), and how often the
     network's best labelled action of a state is one that ended the episode invalid (``invalid_choice``:
     the greedy choice among the labelled actions) and, where the states carry masks, how often its masked
@@ -249,7 +253,7 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
 
 
 def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
-            weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0), seed: int = 0,
+            weights: Weights = DEFAULT_WEIGHTS, seed: int = 0,
             augment: Sequence[Any] = (), anchor: float = 0.0,
             anchor_net: Any = None) -> list[dict[str, float]]:
     """Train ``model``'s online Q-network (a `PixelDoubleDQN`) on ``data`` for ``epochs`` passes with its own
