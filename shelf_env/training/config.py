@@ -421,29 +421,30 @@ def collect_demonstrations(model: Any, config: TrainConfig, demos: Any, set_num_
 def load_demonstration_data(model: Any, config: TrainConfig, log: Callable[[str], None] = print) -> int:
     """Fill ``model``'s kept demonstration store with the transitions of the teacher dataset
     ``config.demo_data`` (`shelf_env.privileged.dataset.transitions`), each non-terminal one with the
-    next state's action mask read from its observation (`shelf_env.actions.observation_masks`). The
-    dataset's observation layout must be the model's; a `ValueError` naming the dataset otherwise.
+    next state's action mask read from its observation (`shelf_env.camera.heightmap.observation_masks`).
+    Every shard's observation layout must be this run's; a `ValueError` naming the dataset and the shard
+    otherwise.
     Returns the number of transitions kept."""
     from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer
     from shelf_env.privileged import dataset
 
     assert config.demo_data is not None
-    shards = dataset.load_dataset(pathlib.Path(config.demo_data))
-    stored = shards[0].meta["layout"]
     names = map_names(config.primitives)
-    if list(stored["obs_shape"]) != list(model.observation_space.shape) or list(stored["map_names"]) != names:
-        raise ValueError(f"demo_data {config.demo_data}: observations {stored['obs_shape']} and maps "
-                         f"{stored['map_names']}; this run has {list(model.observation_space.shape)} and {names}")
+    run_layout = {"obs_shape": list(model.observation_space.shape), "pixel_size": float(config.pixel_size),
+                  "map_names": names}
+    try:  # every shard checked against this run's layout (`load_shard`'s check, naming the shard)
+        shards = dataset.load_dataset(pathlib.Path(config.demo_data), expect_layout=run_layout)
+    except ValueError as err:
+        raise ValueError(f"demo_data {config.demo_data}: its observations do not fit this run: {err}") from err
     data = dataset.transitions(shards, config.invalid_reward, config.progress_reward)
     buffer = model.replay_buffer
     assert isinstance(buffer, HindsightRelabelReplayBuffer)
     capacity = len(data) + (config.buffer_size if config.guard is not None else 0)
-    pixel_size = float(stored["pixel_size"])
     for k in range(len(data)):
         obs = data.obs[data.state[k]][None]
         nxt = data.next_state[k]
         next_obs = obs if nxt < 0 else data.obs[nxt][None]
-        mask = None if nxt < 0 else observation_masks(next_obs[0], pixel_size, stored["map_names"])[None]
+        mask = None if nxt < 0 else observation_masks(next_obs[0], config.pixel_size, names)[None]
         buffer.add_demonstration(obs, next_obs, data.action[k:k + 1], data.reward[k:k + 1], data.done[k:k + 1],
                                  [{}], mask, capacity=capacity, expert=bool(data.expert[k]))
     log(f"demonstrations: {len(data)} transitions of {config.demo_data} ({int(data.expert.sum())} the teacher's "
