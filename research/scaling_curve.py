@@ -41,6 +41,8 @@ def recipe(report: dict[str, Any]) -> str:
         parts.append("progress")
     if report.get("anchor"):
         parts.append(f"anchor {report['anchor']:g}")
+    if report.get("teacher_radius"):
+        parts.append(f"teacher radius {report['teacher_radius']}")
     return ", ".join(parts)
 
 

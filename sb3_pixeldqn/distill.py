@@ -31,6 +31,12 @@ batch of states is the sum of four terms, each over every labelled pixel:
   masks (``masks``: the greedy policy's own choice set, so the teacher's action is taught to be its
   argmax), over the labelled actions otherwise. Without masks a pixel no label covers is never
   pushed down, and the greedy argmax over thousands of them can land on a safe but useless one.
+  With ``teacher_radius`` r > 0 the teacher's action stands for the cells of its map within r cells
+  of it (a square): the best of them must beat every allowed action outside it by the margin,
+  relu(max_out Q + margin − max_near Q). A teacher means "this object" more than "this pixel", and a
+  fully convolutional map can hardly raise one pixel a margin above its neighbours on the same
+  object: with r = 0 the term's largest competitor is nearly always such a neighbour, and it
+  teaches nothing about which object to move.
 
 It knows nothing of shelves: actions are flat indices of the policy's maps.
 """
@@ -150,16 +156,31 @@ def augmented(data: LabelledStates, transforms: Sequence[Any], n_actions: int,
                           data.label_progress)
 
 
+def near_cells(actions: th.Tensor, grid: Sequence[int], radius: int) -> th.Tensor:
+    """(R, n_actions) bool: for each flat action of ``actions`` (R,), the actions of the same map within
+    ``radius`` cells of it in rows and columns (a square); ``grid`` = (n_maps, H, W)."""
+    n_maps, height, width = (int(g) for g in grid)
+    index = th.arange(n_maps * height * width, device=actions.device)
+    m, r, c = index // (height * width), index // width % height, index % width
+    am, ar, ac = actions // (height * width), actions // width % height, actions % width
+    return ((m[None] == am[:, None]) & ((r[None] - ar[:, None]).abs() <= radius)
+            & ((c[None] - ac[:, None]).abs() <= radius))
+
+
 def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
                       value: th.Tensor, teacher: th.Tensor, margin: float = 1.0,
                       weights: Weights = DEFAULT_WEIGHTS,
                       masks: th.Tensor | None = None,
-                      progress: th.Tensor | None = None) -> tuple[th.Tensor, dict[str, float]]:
+                      progress: th.Tensor | None = None,
+                      teacher_radius: int = 0, grid: Sequence[int] | None = None) -> tuple[th.Tensor, dict[str, float]]:
     """The loss of a batch (module docstring): ``q_maps`` (B, n_actions) with gradients, labels indexing
     its rows; ``teacher`` (B,) with -1 where a state has none; ``masks`` (B, n_actions) bool, the allowed
     actions the teacher term ranges over (None: the labelled actions); ``progress`` (K,) the labels' progress
     scores (None: no progress term). ``weights``: of the value, ranking, teacher and progress terms.
-    Returns the loss and its terms."""
+    ``teacher_radius`` > 0: the teacher's action stands for its map's cells within that many cells, which
+    needs ``grid`` = (n_maps, H, W), the layout of the flat actions. Returns the loss and its terms."""
+    if teacher_radius < 0 or (teacher_radius > 0 and grid is None):
+        raise ValueError(f"teacher_radius must be >= 0, and > 0 only with a grid; got {teacher_radius} and {grid}")
     qa = q_maps[label_state, label_action]
     zero = q_maps.sum() * 0.0
     known = ~th.isnan(value)
@@ -172,25 +193,31 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
         ahead = same & ~invalid[:, None] & ~invalid[None, :] & (progress[:, None] > progress[None, :])
         if ahead.any():  # (higher row, lower column) of one state, both valid
             progress_loss = F.relu(qa[None, :] + margin - qa[:, None])[ahead].mean()
-    has_teacher = teacher[label_state] >= 0
     teacher_loss = zero
-    if has_teacher.any():
-        is_teacher = label_action == teacher[label_state]
-        bonus = qa + margin * (~is_teacher).float()
-        rows = th.unique(label_state[has_teacher & is_teacher])
-        if len(rows) and masks is not None:  # over every allowed action of the state
-            q_rows = q_maps[rows]
-            t = teacher[rows]
+    is_teacher = label_action == teacher[label_state]
+    rows = th.unique(label_state[(teacher[label_state] >= 0) & is_teacher])
+    if len(rows):
+        t = teacher[rows]
+        at = th.arange(len(rows), device=q_maps.device)
+        if masks is not None:  # over every allowed action of the state
             allowed = masks[rows].clone()
-            allowed[th.arange(len(rows)), t] = True
-            bonus_all = th.where(allowed, q_rows + margin, th.full_like(q_rows, -th.inf))
-            bonus_all[th.arange(len(rows)), t] = q_rows[th.arange(len(rows)), t]
-            teacher_loss = (bonus_all.max(dim=1).values - q_rows[th.arange(len(rows)), t]).mean()
-        elif len(rows):
+        else:  # over the state's labelled actions
+            allowed = th.zeros((len(rows), q_maps.shape[1]), dtype=th.bool, device=q_maps.device)
             member = label_state[None, :] == rows[:, None]  # (R, K)
-            best = th.where(member, bonus[None, :], th.full_like(bonus[None, :], -th.inf)).max(dim=1).values
-            q_teacher = q_maps[rows, teacher[rows]]
-            teacher_loss = (best - q_teacher).mean()
+            hit = member.nonzero()
+            allowed[hit[:, 0], label_action[hit[:, 1]]] = True
+        allowed[at, t] = True
+        if teacher_radius > 0:
+            assert grid is not None
+            near = near_cells(t, grid, teacher_radius)
+        else:
+            near = th.zeros_like(allowed)
+            near[at, t] = True
+        q_rows = q_maps[rows]
+        none = th.full_like(q_rows, -th.inf)
+        q_near = th.where(allowed & near, q_rows, none).max(dim=1).values
+        q_out = th.where(allowed & ~near, q_rows, none).max(dim=1).values
+        teacher_loss = F.relu(q_out + margin - q_near).mean()
     w_value, w_ranking, w_teacher, w_progress = weights
     loss = w_value * value_loss + w_ranking * ranking + w_teacher * teacher_loss + w_progress * progress_loss
     return loss, {"value": float(value_loss.detach()), "ranking": float(ranking.detach()),
@@ -198,12 +225,14 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
 
 
 def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: float,
-               weights: Weights) -> tuple[th.Tensor, dict[str, float], th.Tensor, LabelledStates]:
+               weights: Weights, teacher_radius: int = 0) -> tuple[th.Tensor, dict[str, float], th.Tensor,
+                                                                 LabelledStates]:
     """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network, with their
-    Q-maps (flat) and the subset they index."""
+    Q-maps ``(B, n_maps, H, W)`` and the subset they index."""
     sub = data.subset(states)
     device = policy.device
-    q = policy.q_net.q_maps(policy.images(th.as_tensor(sub.obs, device=device))).flatten(1)
+    q_maps = policy.q_net.q_maps(policy.images(th.as_tensor(sub.obs, device=device)))
+    q = q_maps.flatten(1)
     label_state = th.as_tensor(sub.label_state, device=device)
     label_action = th.as_tensor(sub.label_action, device=device)
     masks = sub.unpacked_masks(q.shape[1])
@@ -212,27 +241,29 @@ def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: fl
                                     th.as_tensor(sub.teacher_action, device=device), margin, weights,
                                     None if masks is None else th.as_tensor(masks, device=device),
                                     None if sub.label_progress is None else
-                                    th.as_tensor(sub.label_progress, dtype=th.float32, device=device))
-    return loss, parts, q, sub
+                                    th.as_tensor(sub.label_progress, dtype=th.float32, device=device),
+                                    teacher_radius, tuple(q_maps.shape[1:]))
+    return loss, parts, q_maps, sub
 
 
 def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
-             weights: Weights = DEFAULT_WEIGHTS, chunk: int = 32) -> dict[str, float]:
+             weights: Weights = DEFAULT_WEIGHTS, chunk: int = 32, teacher_radius: int = 0) -> dict[str, float]:
     """The mean loss and its terms over every state of ``data`` (no gradients), and how often the
     network's best labelled action of a state is one that ended the episode invalid (``invalid_choice``:
     the greedy choice among the labelled actions) and, where the states carry masks, how often its masked
-    argmax over every action is the teacher's action (``teacher_choice``)."""
+    argmax over every action is the teacher's action (``teacher_choice``) and, with ``teacher_radius`` > 0,
+    lies within that many cells of it on its map (``teacher_near``)."""
     totals: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0, "progress": 0.0}
-    invalid_choices = chosen = agree = taught = 0
+    invalid_choices = chosen = agree = near = taught = 0
     policy.set_training_mode(False)
     with th.no_grad():
         for start in range(0, len(data.obs), chunk):
             states = np.arange(start, min(start + chunk, len(data.obs)))
-            loss, parts, q_maps, sub = batch_loss(policy, data, states, margin, weights)
+            loss, parts, q_maps, sub = batch_loss(policy, data, states, margin, weights, teacher_radius)
             totals["loss"] += float(loss) * len(states)
             for key, v in parts.items():
                 totals[key] += v * len(states)
-            q_np = q_maps.cpu().numpy()
+            q_np = q_maps.flatten(1).cpu().numpy()
             qa = q_np[sub.label_state, sub.label_action]
             masks = sub.unpacked_masks(q_np.shape[1])
             if masks is not None:
@@ -240,6 +271,9 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
                 greedy = np.where(masks, q_np, -np.inf).argmax(axis=1)
                 agree += int((greedy[has] == sub.teacher_action[has]).sum())
                 taught += int(has.sum())
+                if teacher_radius > 0 and has.any():
+                    close = near_cells(th.as_tensor(sub.teacher_action[has]), q_maps.shape[1:], teacher_radius).numpy()
+                    near += int(close[np.arange(len(close)), greedy[has]].sum())
             for s in range(len(states)):
                 rows = np.flatnonzero(sub.label_state == s)
                 if len(rows):
@@ -249,21 +283,24 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
     out["invalid_choice"] = invalid_choices / max(chosen, 1)
     if taught:
         out["teacher_choice"] = agree / taught
+        if teacher_radius > 0:
+            out["teacher_near"] = near / taught
     return out
 
 
 def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
             weights: Weights = DEFAULT_WEIGHTS, seed: int = 0,
             augment: Sequence[Any] = (), anchor: float = 0.0,
-            anchor_net: Any = None) -> list[dict[str, float]]:
+            anchor_net: Any = None, teacher_radius: int = 0) -> list[dict[str, float]]:
     """Train ``model``'s online Q-network (a `PixelDoubleDQN`) on ``data`` for ``epochs`` passes with its own
     optimiser, then copy it to the target network. ``augment``: transforms each batch's states are drawn
     through (`augmented`; ``model.augment`` for the model's own). ``anchor`` > 0 adds that weight times
     the **anchor** term: Huber(Q(s, a), Q_0(s, a)) over every allowed action of a state that no label
     covers, Q_0 being ``anchor_net`` (a frozen copy of the starting Q-network, e.g. made once before the
     first call): the labels move the actions they speak of, the rest of the map keeps what the
-    starting model had learned (which objects to move, in which order). Returns each epoch's mean
-    training loss and terms."""
+    starting model had learned (which objects to move, in which order). ``teacher_radius``: the teacher
+    term's square around the teacher's action (`distillation_loss`). Returns each epoch's mean training
+    loss and terms."""
     policy = model.policy
     data.check(tuple(model.observation_space.shape), int(model.action_space.n))
     if epochs < 1 or batch_states < 1:
@@ -281,7 +318,8 @@ def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int
             batch = data.subset(order[start:start + batch_states])
             batch = augmented(batch, augment, int(model.action_space.n), rng)
             states = np.arange(len(batch.obs))
-            loss, parts, q, sub = batch_loss(policy, batch, states, margin, weights)
+            loss, parts, q_maps, sub = batch_loss(policy, batch, states, margin, weights, teacher_radius)
+            q = q_maps.flatten(1)
             if anchor > 0:
                 assert anchor_net is not None
                 with th.no_grad():

@@ -113,8 +113,8 @@ def test_bad_collect_arguments_are_one_line_errors(capsys: pytest.CaptureFixture
     assert list(tmp_path.iterdir()) == []
 
 
-def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(one_shard: pathlib.Path,
-                                                                           tmp_path: pathlib.Path) -> None:
+def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(
+        one_shard: pathlib.Path, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     from shelf_env.training import distill as distill_cli
 
     shard = dataset.load_shard(dataset.shard_path(one_shard, 0, 0))
@@ -126,14 +126,18 @@ def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(one_sh
     assert np.isnan(labelled.label_value[a["label_valid"] & ~a["label_success"]]).all()
     out = tmp_path / "distilled.zip"
     assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(out), "--epochs", "1",
-                             "--val-fraction", "0"]) == 0
+                             "--val-fraction", "0", "--teacher-radius", "2"]) == 0
     report = json.loads(out.with_suffix(".distill.json").read_text())
     assert report["train_states"] == shard.num_states and report["history"][-1]["train"]["loss"] > 0
+    assert report["teacher_radius"] == 2
     from sb3_pixeldqn import PixelDoubleDQN
 
     assert PixelDoubleDQN.load(out).observation_space.shape == (4, 40, 60)
     assert distill_cli.main(["--data", str(one_shard), "--init", str(tmp_path / "none.zip"), "--out",
                              str(tmp_path / "x.zip")]) == 2
+    assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(tmp_path / "x.zip"),
+                             "--teacher-radius", "-1"]) == 2
+    assert "--teacher-radius must be >= 0" in capsys.readouterr().err
     assert not (tmp_path / "x.zip").exists()
 
 

@@ -184,3 +184,50 @@ def test_the_anchor_keeps_unlabelled_actions_at_the_starting_values() -> None:
     model, data = crafted(4)
     with pytest.raises(ValueError, match="anchor_net"):
         distill(model, data, anchor=1.0)
+
+
+def test_near_cells_is_a_square_on_the_teachers_own_map() -> None:
+    from sb3_pixeldqn.distill import near_cells
+
+    grid = (2, 4, 5)  # two maps of 4 x 5
+    near = near_cells(th.tensor([1 * 5 + 1, 20 + 3 * 5 + 4]), grid, 1).reshape(2, *grid).numpy()
+    expected = np.zeros((2, *grid), dtype=bool)
+    expected[0, 0, 0:3, 0:3] = True  # map 0, around row 1 col 1
+    expected[1, 1, 2:4, 3:5] = True  # map 1, around row 3 col 4 (clipped at the corner)
+    assert (near == expected).all()
+
+
+def test_a_teacher_radius_makes_the_teachers_neighbourhood_compete_with_the_rest_of_the_map() -> None:
+    # one map of 3 x 5: the teacher's cell (1, 1) = 6, its neighbour (1, 2) = 7 valued higher, a far cell (1, 4) = 9
+    q = th.zeros((1, 15))
+    q[0, 6], q[0, 7], q[0, 9] = 1.0, 2.5, 2.0
+    q.requires_grad_(True)
+    args = (th.tensor([0]), th.tensor([6]), th.tensor([False]), th.tensor([np.nan]), th.tensor([6]))
+    masks = th.zeros((1, 15), dtype=th.bool)
+    masks[0, [6, 7, 9]] = True
+    _, pixel = distillation_loss(q, *args, margin=1.0, masks=masks)
+    loss, square = distillation_loss(q, *args, margin=1.0, masks=masks, teacher_radius=1, grid=(1, 3, 5))
+    assert pixel["teacher"] == pytest.approx(2.5)  # (2.5 + 1) - 1: the neighbour is the competitor
+    assert square["teacher"] == pytest.approx(0.5)  # (2 + 1) - 2.5: the far cell against the square's best
+    loss.backward()
+    assert q.grad[0, 7] < 0 < q.grad[0, 9] and q.grad[0, 6] == 0  # the square's best up, the far cell down
+    _, outside_the_mask = distillation_loss(q, *args, margin=1.0, masks=masks & (th.arange(15) != 9),
+                                            teacher_radius=1, grid=(1, 3, 5))
+    assert outside_the_mask["teacher"] == 0.0  # nothing allowed outside the square: nothing to beat
+    with pytest.raises(ValueError, match="teacher_radius"):
+        distillation_loss(q, *args, teacher_radius=1)  # no grid to place the square on
+
+
+def test_teacher_near_counts_greedy_actions_within_the_radius() -> None:
+    model, data = crafted(n_states=8)
+    masked = LabelledStates(data.obs, data.label_state, data.label_action, data.label_invalid, data.label_value,
+                            data.teacher_action, np.packbits(np.ones((8, 240), dtype=bool), axis=1))
+    with th.no_grad():
+        for p in model.q_net.parameters():
+            p.zero_()  # a flat map: the masked argmax is action 0, row 0 col 0, for every state
+    report = evaluate(model.policy, masked, teacher_radius=30)
+    assert report["teacher_near"] == 1.0  # a square this large holds the whole map
+    far = evaluate(model.policy, masked, teacher_radius=1)
+    rows, cols = masked.teacher_action // 20, masked.teacher_action % 20
+    assert far["teacher_near"] == pytest.approx(float(np.mean((rows <= 1) & (cols <= 1))))
+    assert "teacher_near" not in evaluate(model.policy, masked)

@@ -13,10 +13,11 @@ states of the training scenes only, for a scaling curve. Each batch's states are
 model's own augmentation (``model.augment``: the shipped P+S's mirror and class permutation, exact
 symmetries of the cabinet) unless ``--no-augment``. The teacher term's margin ranges over every action
 a state's mask allows (read from its observation), so that the teacher's action becomes the greedy
-argmax, unless ``--teacher-over labelled`` (its labelled actions only); the progress term ranks a
-state's valid actions by the change in sorted objects they made, unless ``--no-progress``. The model
-is saved atomically (an SB3 zip that `PixelDoubleDQN.load` and ``shelf-train --init-from`` take); the
-report goes beside it as JSON.
+argmax, unless ``--teacher-over labelled`` (its labelled actions only); with ``--teacher-radius R`` the
+teacher's action stands for the cells of its map within R cells (its object rather than one pixel);
+the progress term ranks a state's valid actions by the change in sorted objects they made, unless
+``--no-progress``. The model is saved atomically (an SB3 zip that `PixelDoubleDQN.load` and
+``shelf-train --init-from`` take); the report goes beside it as JSON.
 """
 
 from __future__ import annotations
@@ -56,16 +57,20 @@ def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[li
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
         max_states: int | None = None, batch_states: int = 16, margin: float = 1.0,
         learning_rate: float | None = None, seed: int = 0, max_shards: int | None = None,
-        augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0) -> dict[str, Any]:
+        augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0,
+        teacher_radius: int = 0) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
     draw each batch's states through the model's own augmentation (its exact symmetries), as its training did.
     ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions).
     ``progress``: the progress term ranks a state's valid actions by the objects they sorted. ``anchor``:
-    the weight that keeps unlabelled allowed actions at the starting model's values (0: none)."""
+    the weight that keeps unlabelled allowed actions at the starting model's values (0: none).
+    ``teacher_radius``: the teacher term's square around the teacher's action, in cells (0: the pixel)."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     if epochs < 1 or not 0 <= val_fraction < 1:
         raise ValueError(f"need epochs >= 1 and val_fraction in [0, 1), got {epochs} and {val_fraction}")
+    if teacher_radius < 0:
+        raise ValueError(f"--teacher-radius must be >= 0, got {teacher_radius}")
     if not pathlib.Path(init).is_file():
         raise ValueError(f"--init {init!r} does not exist")
     model = PixelDoubleDQN.load(init, device="cpu")
@@ -89,14 +94,15 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     start = time.monotonic()
     history: list[dict[str, Any]] = []
     if val is not None:  # the starting model, for comparison
-        history.append({"epoch": 0, "val": evaluate(model.policy, val, margin)})
+        history.append({"epoch": 0, "val": evaluate(model.policy, val, margin, teacher_radius=teacher_radius)})
         print(json.dumps(history[-1]), flush=True)
     for epoch in range(epochs):
         row: dict[str, Any] = {"epoch": epoch + 1, "train": distill(model, train, 1, batch_states, margin,
                                                                      seed=seed + epoch, augment=transforms,
-                                                                     anchor=anchor, anchor_net=anchor_net)[0]}
+                                                                     anchor=anchor, anchor_net=anchor_net,
+                                                                     teacher_radius=teacher_radius)[0]}
         if val is not None:
-            row["val"] = evaluate(model.policy, val, margin)
+            row["val"] = evaluate(model.policy, val, margin, teacher_radius=teacher_radius)
         history.append(row)
         print(json.dumps(row), flush=True)
     model.save(out)
@@ -104,7 +110,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "train_states": len(train.obs),
               "train_labels": len(train.label_action), "val_states": 0 if val is None else len(val.obs),
               "epochs": epochs, "augment": [repr(t) for t in transforms], "masks": masks, "progress": progress,
-              "anchor": anchor,
+              "anchor": anchor, "teacher_radius": teacher_radius,
               "seconds": round(time.monotonic() - start, 1), "history": history}
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
@@ -131,12 +137,14 @@ def main(argv: list[str] | None = None) -> int:
                    "by the objects they sorted)")
     p.add_argument("--anchor", type=float, default=0.0, help="weight of the term that keeps unlabelled allowed "
                    "actions at the starting model's values (0: none)")
+    p.add_argument("--teacher-radius", type=int, default=0, help="the teacher's action stands for the cells of "
+                   "its map within this many cells (its object rather than one pixel; 0: the pixel)")
     args = p.parse_args(argv)
     try:
         run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
             args.margin, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
             masks=args.teacher_over == "masked", progress=not args.no_progress,
-            anchor=args.anchor)
+            anchor=args.anchor, teacher_radius=args.teacher_radius)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2
