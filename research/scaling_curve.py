@@ -43,6 +43,8 @@ def recipe(report: dict[str, Any]) -> str:
         parts.append(f"anchor {report['anchor']:g}")
     if report.get("teacher_radius"):
         parts.append(f"teacher radius {report['teacher_radius']}")
+    if report.get("teacher_weight", 1.0) != 1.0:
+        parts.append(f"teacher weight {report['teacher_weight']:g}")
     return ", ".join(parts)
 
 

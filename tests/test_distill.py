@@ -231,3 +231,15 @@ def test_teacher_near_counts_greedy_actions_within_the_radius() -> None:
     rows, cols = masked.teacher_action // 20, masked.teacher_action % 20
     assert far["teacher_near"] == pytest.approx(float(np.mean((rows <= 1) & (cols <= 1))))
     assert "teacher_near" not in evaluate(model.policy, masked)
+
+
+def test_the_weights_choose_what_training_fits() -> None:
+    reports = {}
+    for name, weights in (("none", (0.0, 0.0, 0.0, 0.0)), ("teacher", (0.0, 0.0, 1.0, 0.0))):
+        model, data = crafted(n_states=16)
+        th.manual_seed(0)
+        distill(model, data, epochs=15, batch_states=8, weights=weights)
+        reports[name] = evaluate(model.policy, data)
+    start = evaluate(crafted(n_states=16)[0].policy, crafted(n_states=16)[1])
+    assert reports["teacher"]["teacher"] < 0.5 * start["teacher"]  # the teacher term alone fits the teacher
+    assert reports["none"]["teacher"] > 0.8 * start["teacher"]  # with every weight 0 only weight decay moves it
