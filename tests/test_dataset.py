@@ -36,6 +36,25 @@ def test_shard_holds_states_labels_and_the_scene(one_shard: pathlib.Path) -> Non
         assert a["teacher_action"][t] in labelled and len(labelled) <= 9
     executed = [int(x) for x in a["executed_action"] if x >= 0]
     assert executed == shard.meta["episodes"][0]["actions"]
+    import hashlib
+
+    assert shard.meta["model_sha256"] == hashlib.sha256(pathlib.Path(MODEL).read_bytes()).hexdigest()
+
+
+def test_with_explore_1_the_driving_model_is_followed_wherever_it_stays_valid(tmp_path: pathlib.Path) -> None:
+    assert dataset.collect(tmp_path, hours=1.0, ns=(3,), model_path=MODEL, episodes_per_shard=1, max_shards=1,
+                           max_probes=4, explore=1.0) == 1
+    shard = dataset.load_shard(dataset.shard_path(tmp_path, 0, 0))
+    a = shard.arrays
+    assert shard.meta["explore"] == 1.0
+    for t in range(shard.num_states):
+        mine = a["label_state"] == t
+        greedy = mine & (a["label_source"] == dataset.SOURCES.index("greedy"))
+        assert greedy.sum() == 1
+        if a["label_valid"][greedy][0]:  # the model's action is executed; the teacher only rescues falls
+            assert a["executed_action"][t] == a["label_action"][greedy][0]
+        else:
+            assert a["executed_action"][t] != a["label_action"][greedy][0]
 
 
 def test_every_label_equals_a_real_step(one_shard: pathlib.Path) -> None:
@@ -108,6 +127,8 @@ def test_bad_shards_are_refused_by_name(one_shard: pathlib.Path, tmp_path: pathl
 def test_bad_collect_arguments_are_one_line_errors(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path) -> None:
     assert dataset.main(["collect", "--out", str(tmp_path), "--ns", "0"]) == 2
     assert "ns must be numbers of objects" in capsys.readouterr().err
+    assert dataset.main(["collect", "--out", str(tmp_path), "--explore", "1.5", "--model", "none"]) == 2
+    assert "explore in [0, 1]" in capsys.readouterr().err
     assert dataset.main(["collect", "--out", str(tmp_path), "--model", str(tmp_path / "missing.zip")]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []

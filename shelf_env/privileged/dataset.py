@@ -15,13 +15,16 @@ estimate, so ``teacher_value`` is NaN) or the planning teacher (``h-d-planner``,
 `shelf_env.privileged.planning.PlanningTeacher`: rollouts of the lookahead from each safe
 candidate, about ten times the cost per state, with its best rollout's score as ``teacher_value``).
 The executed action is the teacher's choice, or, with probability ``explore``, the model's greedy
-action when its probe kept the scene valid, so the states cover where the learner goes too. An
+action when its probe kept the scene valid, so the states cover where the learner goes too
+(``explore`` = 1 with a distilled model as the driver: DAgger, the learner's own states labelled and its
+falls rescued by the teacher). An
 episode stops at its end (sorted, invalid, 40 actions) or when no probed action keeps the scene
 valid.
 
 Storage (one compressed ``.npz`` per shard, a shard = ``episodes_per_shard`` whole episodes,
 written atomically, so a collection killed mid-shard leaves no partial shard): ``meta`` (JSON: the
-format, the env's dynamics version, the observation layout, the teacher, per episode the reset
+format, the env's dynamics version, the observation layout, the teacher, the driving model's path and
+sha256, ``explore``, per episode the reset
 seed, N and the executed actions, and the wall-clock seconds the shard took), ``obs`` (S, C, H, W)
 uint8, per state ``state_episode``, ``state_step``, ``teacher_action``, ``teacher_value``,
 ``executed_action``, and per label ``label_state`` (index into ``obs``), ``label_action``,
@@ -40,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import hashlib
 import json
 import multiprocessing
 import os
@@ -439,13 +443,14 @@ def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence
         raise ValueError(f"unknown teacher {teacher!r}; known: {list(TEACHERS)}")
     if episodes_per_shard < 1 or max_probes < 1 or not 0 <= explore <= 1:
         raise ValueError("episodes_per_shard and max_probes must be >= 1 and explore in [0, 1]")
-    model = None
+    model, model_sha256 = None, None
     if model_path is not None:
         from sb3_pixeldqn import PixelDoubleDQN
 
         if not pathlib.Path(model_path).is_file():
             raise ValueError(f"driving model {model_path!r} does not exist")
         model = PixelDoubleDQN.load(model_path, device="cpu")
+        model_sha256 = hashlib.sha256(pathlib.Path(model_path).read_bytes()).hexdigest()
     env = gym.make("ShelfSort-v0", num_objects=max(ns), object_set=object_set, primitives=PRIMITIVES,
                    pixel_size=PIXEL_SIZE)
     start, written, shard = time.monotonic(), 0, 0
@@ -468,7 +473,8 @@ def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence
                 episodes.append(ep)
                 metas.append({"reset_seed": seed, "num_objects": n, "actions": ep.actions})
             meta = {"format": FORMAT, "dynamics_version": DYNAMICS_VERSION, "layout": env_layout,
-                    "object_set": object_set, "teacher": teacher, "model": model_path, "explore": explore,
+                    "object_set": object_set, "teacher": teacher, "model": model_path,
+                    "model_sha256": model_sha256, "explore": explore,
                     "max_probes": max_probes, "series": series, "shard": shard, "episodes": metas,
                     "seconds": round(time.monotonic() - t0, 1), "machine": f"{platform.machine()}, "
                     f"{os.cpu_count()} CPUs", "collected": time.strftime("%Y-%m-%d")}
@@ -535,6 +541,9 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--episodes-per-shard", type=int, default=2, help="whole episodes per shard file")
     c.add_argument("--max-shards", type=int, default=None, help="stop once each series holds this many shards")
     c.add_argument("--max-probes", type=int, default=24, help="most labelled actions per state")
+    c.add_argument("--explore", type=float, default=0.3, help="probability of executing the driving model's greedy "
+                   "action where its probe kept the scene valid (1: follow the model, the teacher only rescuing its "
+                   "falls, as in DAgger)")
     c.add_argument("--teacher", choices=TEACHERS, default="h-d-lookahead", help="the privileged teacher whose choice "
                    "is executed and labelled")
     s = sub.add_parser("status", help="print what the dataset holds")
@@ -550,7 +559,8 @@ def main(argv: list[str] | None = None) -> int:
         jobs = [{"out": args.out, "series": args.series + k, "hours": args.hours, "ns": tuple(args.ns),
                  "model_path": None if args.model == "none" else args.model,
                  "episodes_per_shard": args.episodes_per_shard, "max_shards": args.max_shards,
-                 "max_probes": args.max_probes, "teacher": args.teacher} for k in range(args.workers)]
+                 "max_probes": args.max_probes, "teacher": args.teacher, "explore": args.explore}
+                for k in range(args.workers)]
         if args.workers == 1:
             written = [_collect_worker(jobs[0])]
         else:
