@@ -7,6 +7,7 @@ and fallen actions per greedy action at each N; SR at each N; reference policies
 
     python research/scaling_curve.py results/distill_scaling --out results/distill_scaling/report.md \\
         --png results/distill_scaling/scaling.png
+    python research/scaling_curve.py results/distill_test --reports results/distill_scaling ...   # held-out scenes
 """
 
 from __future__ import annotations
@@ -20,10 +21,12 @@ from shelf_env.evaluation.falls import FallEpisode, cell_summary
 from shelf_env.files import write_text_atomically
 
 
-def load(folder: pathlib.Path) -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]]]:
-    """The distillation reports by model stem, and the fall cells."""
+def load(folder: pathlib.Path, reports_folder: pathlib.Path | None = None) -> tuple[dict[str, dict[str, Any]],
+                                                                                  list[dict[str, Any]]]:
+    """The distillation reports by model stem (in ``reports_folder``, default ``folder``), and the fall cells
+    of ``folder``."""
     reports = {p.name.removesuffix(".distill.json"): json.loads(p.read_text())
-               for p in sorted(folder.glob("*.distill.json"))}
+               for p in sorted((reports_folder or folder).glob("*.distill.json"))}
     cells = list(json.loads((folder / "falls.json").read_text()).values())
     for cell in cells:  # the summary of this version (cells measured before it lack the newer numbers)
         cell.update(cell_summary([FallEpisode(**e) for e in cell.get("per_episode", [])]) if "per_episode" in cell
@@ -155,8 +158,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("folder", type=pathlib.Path)
     p.add_argument("--out", type=pathlib.Path, default=None, help="write the Markdown table here")
     p.add_argument("--png", type=pathlib.Path, default=None, help="write the plot here")
+    p.add_argument("--reports", type=pathlib.Path, default=None, help="the folder of the distillation reports "
+                   "(default: the results folder), e.g. the held-out measurements of models distilled elsewhere")
     args = p.parse_args(argv)
-    data = rows(*load(args.folder))
+    data = rows(*load(args.folder, args.reports))
     text = table(data)
     print(text)
     if args.out is not None:

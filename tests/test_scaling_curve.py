@@ -42,3 +42,18 @@ def test_the_curve_orders_models_by_states_and_keeps_references_apart(tmp_path: 
     png = tmp_path / "curve.png"
     assert scaling_curve.main([str(tmp_path), "--png", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    held_out = tmp_path / "held_out"  # the same models measured elsewhere, their reports read from here
+    held_out.mkdir()
+    (held_out / "falls.json").write_text(json.dumps({"0": cell("runs/p_s_d100.zip", 8, 50, 1, 2)}))
+    assert scaling_curve.rows(*scaling_curve.load(held_out))[0]["states"] is None  # no report there
+    (only,) = scaling_curve.rows(*scaling_curve.load(held_out, tmp_path))
+    assert (only["policy"], only["states"], only["val_loss"]) == ("p_s_d100", 100, 5.0)
+
+
+def test_the_recipe_names_every_option_that_differs_from_the_defaults() -> None:
+    report = {"augment": ["MirrorWidth(...)"], "masks": True, "progress": True, "anchor": 1.0, "teacher_radius": 2,
+              "teacher_weight": 5.0}
+    assert scaling_curve.recipe(report) == \
+        "augmented, teacher over allowed actions, progress, anchor 1, teacher radius 2, teacher weight 5"
+    assert scaling_curve.recipe(report | {"teacher_radius": 0, "teacher_weight": 1.0}) == \
+        "augmented, teacher over allowed actions, progress, anchor 1"
