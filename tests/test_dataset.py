@@ -198,3 +198,20 @@ def test_shards_become_exact_transitions_for_the_demonstration_store(one_shard: 
         env.close()
     with pytest.raises(ValueError, match="demo_data"):
         cfg.TrainConfig(demo_data=str(one_shard))  # beside the default demo_policy h-a
+
+
+def test_each_shard_series_holds_out_its_own_last_scenes() -> None:
+    from shelf_env.training.distill import split_by_scene
+
+    def fake(series: int, episodes_of_states: list[int], n_episodes: int) -> dataset.Shard:
+        return dataset.Shard(pathlib.Path(f"s{series:02d}.npz"), {"series": series, "episodes": [{}] * n_episodes},
+                             {"state_episode": np.array(episodes_of_states)})
+
+    # series 0: scenes of 2, 1, 3, 2 states (two shards); series 1: scenes of 1 and 2 states
+    shards = [fake(0, [0, 0, 1], 2), fake(0, [0, 0, 0, 1, 1], 2), fake(1, [0, 1, 1], 2)]
+    train, val = split_by_scene(shards, 0.5)
+    assert val == [3, 4, 5, 6, 7, 9, 10]  # series 0's last two scenes (states 3-7), series 1's last (9, 10)
+    assert train == [0, 1, 2, 8]
+    assert split_by_scene(shards, 0.0) == (list(range(11)), [])
+    with pytest.raises(ValueError, match="leave none for training"):
+        split_by_scene(shards[2:], 0.99)

@@ -13,13 +13,13 @@ DIR=results/distill_scaling
 M=runs/distill_scaling
 mkdir -p "$M"
 
-distil() {  # NAME STATES OPTIONS...: STATES "all" or a number of training states
+distil() {  # NAME STATES OPTIONS...: STATES "all" or a number of training states; SHARDS (default 35) the shards
   local name=$1 states=$2
   shift 2
   local extra=()
   [ "$states" != all ] && extra=(--max-states "$states")
   if [ ! -f "$M/$name.zip" ]; then
-    "$PY" -m shelf_env.training.distill --data data/teacher --max-shards 35 "${extra[@]}" \
+    "$PY" -m shelf_env.training.distill --data data/teacher --max-shards "${SHARDS:-35}" "${extra[@]}" \
       --init examples/pretrained/p_s.zip --out "$M/$name.zip" --epochs 8 --val-fraction 0.2 "$@"
   fi
   cp "$M/$name.distill.json" "$DIR/$name.distill.json"
@@ -38,6 +38,13 @@ distil p_s_dall_aug all --teacher-over labelled --no-progress  # A + augmentatio
 distil p_s_dall_aug_m all --no-progress                         # + the margin over every allowed action
 distil p_s_dall_aug_mp all                                      # C: + the progress term
 
+# The first 52 shards (104 scenes: 1,325 training states; the last 21 scenes validation): D, and D with the
+# teacher's action standing for its 5 x 5-cell square (radius 2), then also weighted 5, then for 24 epochs
+SHARDS=52 distil p_s_d52sh_aug_mpa all --anchor 1.0
+SHARDS=52 distil p_s_d52sh_aug_mpa_r2 all --anchor 1.0 --teacher-radius 2
+SHARDS=52 distil p_s_d52sh_aug_mpa_r2_t5 all --anchor 1.0 --teacher-radius 2 --teacher-weight 5
+SHARDS=52 distil p_s_d52sh_aug_mpa_r2_t5_e24 all --anchor 1.0 --teacher-radius 2 --teacher-weight 5 --epochs 24
+
 # B + 45 min of PixelDoubleDQN with the dataset as demonstrations (the data/teacher of the time: 37 shards)
 if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then
   bash results/distill_finetune/train.sh 0.75 "$M/p_s_dall_aug_m.zip" runs/distill_finetune
@@ -52,4 +59,6 @@ ps=examples/pretrained/p_s.zip
   --ns 8 --runs 10 --seed 2000 --out "$DIR/falls.json"
 "$PY" -m shelf_env.evaluation.falls "$ps" "$M/p_s_dall_aug_mpa.zip" "$M/p_s_dall_aug_mpa.zip+loop-breaker" \
   "$ps+loop-breaker" h-d --ns 5 11 --runs 10 --seed 2000 --out "$DIR/falls.json"
+"$PY" -m shelf_env.evaluation.falls "$M/p_s_d52sh_aug_mpa.zip" "$M/p_s_d52sh_aug_mpa_r2.zip" \
+  "$M/p_s_d52sh_aug_mpa_r2_t5.zip" "$M/p_s_d52sh_aug_mpa_r2_t5_e24.zip" --ns 8 --runs 10 --seed 2000 --out "$DIR/falls.json"
 "$PY" research/scaling_curve.py "$DIR" --out "$DIR/report.md" --png "$DIR/scaling.png"

@@ -15,3 +15,18 @@ ps=examples/pretrained/p_s.zip
 # first in a copy of the simulator (shelf_env.evaluation.falls)
 .venv/bin/python -m shelf_env.evaluation.falls "$ps" "$d" "$d+loop-breaker" h-d --ns 8 --runs 10 --seed 0 \
   --out results/distill_test/falls.json
+
+# Recipe D's scaling curve on these held-out scenes (the recipe was fixed before; the points differ only in
+# the states distilled: 220, 440, 822 from the first 35 shards, 1,325 from the first 52), the greedy action's
+# invalid actions per action and SR on the first 10 scenes at N = 5, 8, 11, and the 1,325-state model's SR on
+# all 30 scenes per N
+M=runs/distill_scaling
+[ -f $M/p_s_d52sh_aug_mpa.zip ] || bash results/distill_scaling/run.sh
+.venv/bin/shelf-evaluate --policies $M/p_s_d52sh_aug_mpa.zip \
+  --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --reuse-cells results/models "$@"
+.venv/bin/python -m shelf_env.evaluation.falls $M/p_s_d52sh_aug_mpa.zip "$ps" h-d "$d" --ns 8 5 11 --runs 10 \
+  --seed 0 --out results/distill_test/falls.json
+.venv/bin/python -m shelf_env.evaluation.falls $M/p_s_d440_aug_mpa.zip $M/p_s_d220_aug_mpa.zip --ns 8 5 11 \
+  --runs 10 --seed 0 --out results/distill_test/falls.json
+.venv/bin/python research/scaling_curve.py results/distill_test --reports results/distill_scaling \
+  --out results/distill_test/scaling.md --png results/distill_test/scaling.png

@@ -4,7 +4,7 @@
         --out runs/distilled.zip --epochs 10 [--max-states 10000]
 
 The dataset's scenes are split by scene (every state of a held-out scene is held out): the last
-``--val-fraction`` of its scenes, in shard order, are validation. The report starts with the
+``--val-fraction`` of each shard series' scenes, in shard order, are validation. The report starts with the
 starting model on the validation states (epoch 0); each epoch then reports the training loss and,
 on the validation states, the loss and ``invalid_choice``: how often the model's best
 labelled action of a state is one that ended the episode invalid (the driving model's greedy
@@ -38,20 +38,30 @@ from shelf_env.privileged import dataset
 
 
 def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[list[int], list[int]]:
-    """State indices (over the shards in order) of the training and validation scenes."""
-    scene_of_state: list[int] = []
-    scene = 0
+    """State indices (over the shards in order) of the training and validation scenes: the last
+    ``val_fraction`` of each shard series' scenes (``meta["series"]``) are validation. Series are
+    collected apart (another driver, another machine), so each gives its share of held-out scenes, and a
+    series added later does not become the validation set as a whole."""
+    scenes: dict[int, list[list[int]]] = {}  # series -> its scenes in order -> their state indices
+    first = 0
     for shard in shards:
         episodes = shard.arrays["state_episode"]
-        scene_of_state += [scene + int(e) for e in episodes]
-        scene += len(shard.meta["episodes"])
-    n_val = int(round(scene * val_fraction))
-    if scene - n_val < 1:
-        raise ValueError(f"{scene} scenes leave none for training at val_fraction {val_fraction}")
-    first_val = scene - n_val
-    train = [i for i, s in enumerate(scene_of_state) if s < first_val]
-    val = [i for i, s in enumerate(scene_of_state) if s >= first_val]
-    return train, val
+        own = scenes.setdefault(int(shard.meta["series"]), [])
+        base = len(own)
+        own.extend([] for _ in shard.meta["episodes"])
+        for i, e in enumerate(episodes):
+            own[base + int(e)].append(first + i)
+        first += len(episodes)
+    train: list[int] = []
+    val: list[int] = []
+    for own in scenes.values():
+        n_val = int(round(len(own) * val_fraction))
+        for k, states in enumerate(own):
+            (val if k >= len(own) - n_val else train).extend(states)
+    if not train:
+        raise ValueError(f"{sum(len(o) for o in scenes.values())} scenes leave none for training at val_fraction "
+                         f"{val_fraction}")
+    return sorted(train), sorted(val)
 
 
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
