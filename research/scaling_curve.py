@@ -48,6 +48,8 @@ def recipe(report: dict[str, Any]) -> str:
         parts.append(f"teacher radius {report['teacher_radius']}")
     if report.get("teacher_weight", 1.0) != 1.0:
         parts.append(f"teacher weight {report['teacher_weight']:g}")
+    if report.get("progress_radius"):
+        parts.append(f"progress radius {report['progress_radius']}")
     return ", ".join(parts)
 
 

@@ -25,7 +25,10 @@ batch of states is the sum of four terms, each over every labelled pixel:
   ``progress`` is valued at least ``margin`` above one with a lower: mean relu(Q(s, a_lo) + margin −
   Q(s, a_hi)). It is what tells a step that sorts an object from a valid step that changes nothing
   useful (picking an object already in its region and putting it back there), which the other
-  terms leave level: without it a distilled policy can avoid every fall and still loop;
+  terms leave level: without it a distilled policy can avoid every fall and still loop. With
+  ``progress_radius`` r > 0 the lower action stands for the allowed cells of its map within r cells
+  (the best of them is pushed below the higher action): a useless pick is useless at every cell of its
+  object, and pushing down the one labelled pixel leaves its neighbours to be the next greedy choice;
 - **teacher**: the large-margin loss of demonstrations on the teacher's action: max_a [Q(s, a) +
   margin·(a ≠ a_T)] − Q(s, a_T), over every action the state's mask allows where the states carry
   masks (``masks``: the greedy policy's own choice set, so the teacher's action is taught to be its
@@ -172,15 +175,20 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
                       weights: Weights = DEFAULT_WEIGHTS,
                       masks: th.Tensor | None = None,
                       progress: th.Tensor | None = None,
-                      teacher_radius: int = 0, grid: Sequence[int] | None = None) -> tuple[th.Tensor, dict[str, float]]:
+                      teacher_radius: int = 0, grid: Sequence[int] | None = None,
+                      progress_radius: int = 0) -> tuple[th.Tensor, dict[str, float]]:
     """The loss of a batch (module docstring): ``q_maps`` (B, n_actions) with gradients, labels indexing
     its rows; ``teacher`` (B,) with -1 where a state has none; ``masks`` (B, n_actions) bool, the allowed
     actions the teacher term ranges over (None: the labelled actions); ``progress`` (K,) the labels' progress
     scores (None: no progress term). ``weights``: of the value, ranking, teacher and progress terms.
     ``teacher_radius`` > 0: the teacher's action stands for its map's cells within that many cells, which
-    needs ``grid`` = (n_maps, H, W), the layout of the flat actions. Returns the loss and its terms."""
-    if teacher_radius < 0 or (teacher_radius > 0 and grid is None):
-        raise ValueError(f"teacher_radius must be >= 0, and > 0 only with a grid; got {teacher_radius} and {grid}")
+    needs ``grid`` = (n_maps, H, W), the layout of the flat actions. ``progress_radius`` > 0: in the progress
+    term the lower action of a pair stands for the allowed cells of its map within that many cells (the
+    best of them must lie a margin below the higher action), which needs ``grid`` too. Returns the loss
+    and its terms."""
+    for name, radius in (("teacher_radius", teacher_radius), ("progress_radius", progress_radius)):
+        if radius < 0 or (radius > 0 and grid is None):
+            raise ValueError(f"{name} must be >= 0, and > 0 only with a grid; got {radius} and {grid}")
     qa = q_maps[label_state, label_action]
     zero = q_maps.sum() * 0.0
     known = ~th.isnan(value)
@@ -192,7 +200,15 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
     if progress is not None:
         ahead = same & ~invalid[:, None] & ~invalid[None, :] & (progress[:, None] > progress[None, :])
         if ahead.any():  # (higher row, lower column) of one state, both valid
-            progress_loss = F.relu(qa[None, :] + margin - qa[:, None])[ahead].mean()
+            low = qa
+            if progress_radius > 0:  # the lower action's neighbourhood: the best allowed cell near it
+                assert grid is not None
+                n_maps, height, width = (int(g) for g in grid)
+                shown = q_maps if masks is None else th.where(masks, q_maps, th.full_like(q_maps, -th.inf))
+                pooled = F.max_pool2d(shown.view(-1, n_maps, height, width), 2 * progress_radius + 1, stride=1,
+                                      padding=progress_radius).flatten(1)
+                low = th.maximum(pooled[label_state, label_action], qa)
+            progress_loss = F.relu(low[None, :] + margin - qa[:, None])[ahead].mean()
     teacher_loss = zero
     is_teacher = label_action == teacher[label_state]
     rows = th.unique(label_state[(teacher[label_state] >= 0) & is_teacher])
@@ -225,8 +241,8 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
 
 
 def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: float,
-               weights: Weights, teacher_radius: int = 0) -> tuple[th.Tensor, dict[str, float], th.Tensor,
-                                                                 LabelledStates]:
+               weights: Weights, teacher_radius: int = 0,
+               progress_radius: int = 0) -> tuple[th.Tensor, dict[str, float], th.Tensor, LabelledStates]:
     """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network, with their
     Q-maps ``(B, n_maps, H, W)`` and the subset they index."""
     sub = data.subset(states)
@@ -242,12 +258,13 @@ def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: fl
                                     None if masks is None else th.as_tensor(masks, device=device),
                                     None if sub.label_progress is None else
                                     th.as_tensor(sub.label_progress, dtype=th.float32, device=device),
-                                    teacher_radius, tuple(q_maps.shape[1:]))
+                                    teacher_radius, tuple(q_maps.shape[1:]), progress_radius)
     return loss, parts, q_maps, sub
 
 
 def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
-             weights: Weights = DEFAULT_WEIGHTS, chunk: int = 32, teacher_radius: int = 0) -> dict[str, float]:
+             weights: Weights = DEFAULT_WEIGHTS, chunk: int = 32, teacher_radius: int = 0,
+             progress_radius: int = 0) -> dict[str, float]:
     """The mean loss and its terms over every state of ``data`` (no gradients), and how often the
     network's best labelled action of a state is one that ended the episode invalid (``invalid_choice``:
     the greedy choice among the labelled actions) and, where the states carry masks, how often its masked
@@ -259,7 +276,8 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
     with th.no_grad():
         for start in range(0, len(data.obs), chunk):
             states = np.arange(start, min(start + chunk, len(data.obs)))
-            loss, parts, q_maps, sub = batch_loss(policy, data, states, margin, weights, teacher_radius)
+            loss, parts, q_maps, sub = batch_loss(policy, data, states, margin, weights, teacher_radius,
+                                                  progress_radius)
             totals["loss"] += float(loss) * len(states)
             for key, v in parts.items():
                 totals[key] += v * len(states)
@@ -291,7 +309,7 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
 def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
             weights: Weights = DEFAULT_WEIGHTS, seed: int = 0,
             augment: Sequence[Any] = (), anchor: float = 0.0,
-            anchor_net: Any = None, teacher_radius: int = 0) -> list[dict[str, float]]:
+            anchor_net: Any = None, teacher_radius: int = 0, progress_radius: int = 0) -> list[dict[str, float]]:
     """Train ``model``'s online Q-network (a `PixelDoubleDQN`) on ``data`` for ``epochs`` passes with its own
     optimiser, then copy it to the target network. ``augment``: transforms each batch's states are drawn
     through (`augmented`; ``model.augment`` for the model's own). ``anchor`` > 0 adds that weight times
@@ -299,7 +317,8 @@ def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int
     covers, Q_0 being ``anchor_net`` (a frozen copy of the starting Q-network, e.g. made once before the
     first call): the labels move the actions they speak of, the rest of the map keeps what the
     starting model had learned (which objects to move, in which order). ``teacher_radius``: the teacher
-    term's square around the teacher's action (`distillation_loss`). Returns each epoch's mean training
+    term's square around the teacher's action, ``progress_radius`` the progress term's around its lower
+    action (`distillation_loss`). Returns each epoch's mean training
     loss and terms."""
     policy = model.policy
     data.check(tuple(model.observation_space.shape), int(model.action_space.n))
@@ -318,7 +337,8 @@ def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int
             batch = data.subset(order[start:start + batch_states])
             batch = augmented(batch, augment, int(model.action_space.n), rng)
             states = np.arange(len(batch.obs))
-            loss, parts, q_maps, sub = batch_loss(policy, batch, states, margin, weights, teacher_radius)
+            loss, parts, q_maps, sub = batch_loss(policy, batch, states, margin, weights, teacher_radius,
+                                                  progress_radius)
             q = q_maps.flatten(1)
             if anchor > 0:
                 assert anchor_net is not None

@@ -243,3 +243,25 @@ def test_the_weights_choose_what_training_fits() -> None:
     start = evaluate(crafted(n_states=16)[0].policy, crafted(n_states=16)[1])
     assert reports["teacher"]["teacher"] < 0.5 * start["teacher"]  # the teacher term alone fits the teacher
     assert reports["none"]["teacher"] > 0.8 * start["teacher"]  # with every weight 0 only weight decay moves it
+
+
+def test_a_progress_radius_pushes_down_the_best_allowed_cell_near_a_useless_action() -> None:
+    # one map of 3 x 5; a useful action at (0, 0) = 0; a useless one labelled at (1, 3) = 8, its unlabelled
+    # neighbour (1, 4) = 9 valued higher (the next greedy choice), a disallowed neighbour (2, 3) = 13 higher still
+    q = th.zeros((1, 15))
+    q[0, 0], q[0, 8], q[0, 9], q[0, 13] = 2.0, 0.5, 1.8, 5.0
+    q.requires_grad_(True)
+    args = (th.tensor([0, 0]), th.tensor([0, 8]), th.tensor([False, False]), th.full((2,), np.nan),
+            th.tensor([-1]))
+    progress = th.tensor([1.0, 0.0])
+    masks = th.ones((1, 15), dtype=th.bool)
+    masks[0, 13] = False
+    _, pixel = distillation_loss(q, *args, margin=1.0, masks=masks, progress=progress)
+    loss, square = distillation_loss(q, *args, margin=1.0, masks=masks, progress=progress, progress_radius=1,
+                                     grid=(1, 3, 5))
+    assert pixel["progress"] == pytest.approx(0.0)  # 0.5 + 1 <= 2: the labelled pixel alone is low enough
+    assert square["progress"] == pytest.approx(0.8)  # 1.8 + 1 - 2: its allowed neighbour is not
+    loss.backward()
+    assert q.grad[0, 9] > 0 > q.grad[0, 0] and q.grad[0, 8] == 0 and q.grad[0, 13] == 0
+    with pytest.raises(ValueError, match="progress_radius"):
+        distillation_loss(q, *args, progress=progress, progress_radius=1)  # no grid
