@@ -216,3 +216,17 @@ def test_each_shard_series_holds_out_its_own_last_scenes() -> None:
     assert split_by_scene(shards, 0.0) == (list(range(11)), [])
     with pytest.raises(ValueError, match="leave none for training"):
         split_by_scene(shards[2:], 0.99)
+
+
+def test_max_shards_names_a_growing_datasets_past_per_series() -> None:
+    from shelf_env.training.distill import select_shards
+
+    shards = [dataset.Shard(pathlib.Path(f"s{k:02d}_{i:05d}.npz"), {}, {}) for k, i in
+              ((0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (2, 0))]
+    names = [s.path.name[:9] for s in select_shards(shards, "s00:2,s01:1")]
+    assert names == ["s00_00000", "s00_00001", "s01_00000"]
+    assert len(select_shards(shards, 4)) == len(select_shards(shards, "4")) == 4 and select_shards(shards, None) == shards
+    with pytest.raises(ValueError, match="asks for 3 shards of series s01; the dataset holds 2"):
+        select_shards(shards, "s01:3")
+    with pytest.raises(ValueError, match="a number or"):
+        select_shards(shards, "first:3")

@@ -65,9 +65,32 @@ def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[li
     return sorted(train), sorted(val)
 
 
+def select_shards(shards: list[dataset.Shard], spec: int | str | None) -> list[dataset.Shard]:
+    """The shards a run uses, so that a growing dataset's past can be named: all (None), the first ``spec``
+    in name order (a number), or the first k of each series listed (``"s00:55,s01:9"``; other series left
+    out). A series listed with fewer shards than asked is refused."""
+    if spec is None:
+        return shards
+    if isinstance(spec, int) or str(spec).isdigit():
+        return shards[:int(spec)]
+    wanted: dict[str, int] = {}
+    for part in str(spec).split(","):
+        name, _, digits = part.strip().partition(":")
+        if not (len(name) == 3 and name[0] == "s" and name[1:].isdigit() and digits.isdigit()):
+            raise ValueError(f"--max-shards takes a number or 's00:55,s01:9', got {spec!r}")
+        wanted[name] = int(digits)
+    out: list[dataset.Shard] = []
+    for name, count in wanted.items():
+        own = [s for s in shards if s.path.name.startswith(name + "_")][:count]
+        if len(own) < count:
+            raise ValueError(f"--max-shards asks for {count} shards of series {name}; the dataset holds {len(own)}")
+        out += own
+    return sorted(out, key=lambda s: s.path.name)
+
+
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
         max_states: int | None = None, batch_states: int = 16, margin: float = 1.0,
-        learning_rate: float | None = None, seed: int = 0, max_shards: int | None = None,
+        learning_rate: float | None = None, seed: int = 0, max_shards: int | str | None = None,
         augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0,
         teacher_radius: int = 0, teacher_weight: float = 1.0, progress_radius: int = 0) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
@@ -92,7 +115,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     if learning_rate is not None:
         for group in model.policy.optimizer.param_groups:
             group["lr"] = learning_rate
-    shards = dataset.load_dataset(data)[:max_shards]  # the first shards in name order: a growing dataset's past
+    shards = select_shards(dataset.load_dataset(data), max_shards)  # a growing dataset's past
     stored = shards[0].meta["layout"]
     if list(stored["obs_shape"]) != list(model.observation_space.shape) or \
             len(stored["map_names"]) != model.policy.n_maps:
@@ -148,7 +171,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--margin", type=float, default=1.0, help="the ranking and teacher losses' margin")
     p.add_argument("--learning-rate", type=float, default=None, help="the optimiser's rate (default: the model's)")
     p.add_argument("--seed", type=int, default=0, help="seed of the batch order")
-    p.add_argument("--max-shards", type=int, default=None, help="use the first this many shards (in name order)")
+    p.add_argument("--max-shards", default=None, help="use the first this many shards (in name order), or of "
+                   "each series named: 's00:55,s01:9'")
     p.add_argument("--no-augment", action="store_true", help="train on the states as stored (default: drawn "
                    "through the model's own augmentation)")
     p.add_argument("--teacher-over", choices=("masked", "labelled"), default="masked", help="the actions the "
