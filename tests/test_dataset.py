@@ -225,7 +225,8 @@ def test_max_shards_names_a_growing_datasets_past_per_series() -> None:
               ((0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (2, 0))]
     names = [s.path.name[:9] for s in select_shards(shards, "s00:2,s01:1")]
     assert names == ["s00_00000", "s00_00001", "s01_00000"]
-    assert len(select_shards(shards, 4)) == len(select_shards(shards, "4")) == 4 and select_shards(shards, None) == shards
+    assert len(select_shards(shards, 4)) == len(select_shards(shards, "4")) == 4
+    assert select_shards(shards, None) == shards
     with pytest.raises(ValueError, match="asks for 3 shards of series s01; the dataset holds 2"):
         select_shards(shards, "s01:3")
     with pytest.raises(ValueError, match="a number or"):
