@@ -39,11 +39,13 @@ distil p_s_dall_aug_m all --no-progress                         # + the margin o
 distil p_s_dall_aug_mp all                                      # C: + the progress term
 
 # The first 52 shards (104 scenes: 1,325 training states; the last 21 scenes validation): D, and D with the
-# teacher's action standing for its 5 x 5-cell square (radius 2), then also weighted 5, then for 24 epochs
+# teacher's action standing for its 5 x 5-cell square (radius 2), then also weighted 5, then for 24 epochs;
+# D with the progress term's lower action standing for its square
 SHARDS=52 distil p_s_d52sh_aug_mpa all --anchor 1.0
 SHARDS=52 distil p_s_d52sh_aug_mpa_r2 all --anchor 1.0 --teacher-radius 2
 SHARDS=52 distil p_s_d52sh_aug_mpa_r2_t5 all --anchor 1.0 --teacher-radius 2 --teacher-weight 5
 SHARDS=52 distil p_s_d52sh_aug_mpa_r2_t5_e24 all --anchor 1.0 --teacher-radius 2 --teacher-weight 5 --epochs 24
+SHARDS=52 distil p_s_d52sh_aug_mpa_pr2 all --anchor 1.0 --progress-radius 2  # D, a useless action's square pushed down
 
 # B + 45 min of PixelDoubleDQN with the dataset as demonstrations (the data/teacher of the time: 37 shards)
 if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then
@@ -60,5 +62,5 @@ ps=examples/pretrained/p_s.zip
 "$PY" -m shelf_env.evaluation.falls "$ps" "$M/p_s_dall_aug_mpa.zip" "$M/p_s_dall_aug_mpa.zip+loop-breaker" \
   "$ps+loop-breaker" h-d --ns 5 11 --runs 10 --seed 2000 --out "$DIR/falls.json"
 "$PY" -m shelf_env.evaluation.falls "$M/p_s_d52sh_aug_mpa.zip" "$M/p_s_d52sh_aug_mpa_r2.zip" \
-  "$M/p_s_d52sh_aug_mpa_r2_t5.zip" "$M/p_s_d52sh_aug_mpa_r2_t5_e24.zip" --ns 8 --runs 10 --seed 2000 --out "$DIR/falls.json"
+  "$M/p_s_d52sh_aug_mpa_r2_t5.zip" "$M/p_s_d52sh_aug_mpa_r2_t5_e24.zip" "$M/p_s_d52sh_aug_mpa_pr2.zip" --ns 8 --runs 10 --seed 2000 --out "$DIR/falls.json"
 "$PY" research/scaling_curve.py "$DIR" --out "$DIR/report.md" --png "$DIR/scaling.png"
