@@ -231,3 +231,17 @@ def test_max_shards_names_a_growing_datasets_past_per_series() -> None:
         select_shards(shards, "s01:3")
     with pytest.raises(ValueError, match="a number or"):
         select_shards(shards, "first:3")
+
+
+def test_driver_progress_counts_the_greedy_and_teacher_labels_of_each_state(one_shard: pathlib.Path) -> None:
+    from research import driver_progress
+
+    shard = dataset.load_shard(dataset.shard_path(one_shard, 0, 0))
+    a = shard.arrays
+    greedy = a["label_source"] == dataset.SOURCES.index("greedy")
+    (row,) = driver_progress.series_rows([shard]).values()
+    assert row["states"] == shard.num_states and row["sha256"] == shard.meta["model_sha256"][:12]
+    assert row["valid"] == int(a["label_valid"][greedy].sum())
+    assert row["greedy_progress"] == int((a["label_valid"] & (a["label_dsorted"] > 0))[greedy].sum())
+    assert row["greedy_progress"] <= row["valid"] and row["teacher_progress"] <= row["any_progress"] <= row["states"]
+    assert f"| s00 | p_s.zip ({row['sha256']}) | {shard.num_states} |" in driver_progress.table({"s00": row})
