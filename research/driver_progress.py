@@ -22,7 +22,8 @@ def series_rows(shards: list[dataset.Shard]) -> dict[str, dict[str, Any]]:
     """Per series (``s00``, ...): states, the driver (path and sha256 prefix of its shards' meta), and the shares
     of states where the greedy action was valid, where a valid greedy action made progress, where the teacher's
     choice made progress, and where some labelled valid action did."""
-    greedy_source, rows = dataset.SOURCES.index("greedy"), {}
+    greedy_source = dataset.SOURCES.index("greedy")
+    rows: dict[str, dict[str, Any]] = {}
     for shard in shards:
         a = shard.arrays
         row = rows.setdefault(shard.path.name[:3], {"driver": shard.meta.get("model"),

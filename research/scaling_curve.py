@@ -50,6 +50,8 @@ def recipe(report: dict[str, Any]) -> str:
         parts.append(f"teacher weight {report['teacher_weight']:g}")
     if report.get("progress_radius"):
         parts.append(f"progress radius {report['progress_radius']}")
+    if report.get("progress_weight", 1.0) != 1.0:
+        parts.append(f"progress weight {report['progress_weight']:g}")
     return ", ".join(parts)
 
 

@@ -92,7 +92,8 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         max_states: int | None = None, batch_states: int = 16, margin: float = 1.0,
         learning_rate: float | None = None, seed: int = 0, max_shards: int | str | None = None,
         augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0,
-        teacher_radius: int = 0, teacher_weight: float = 1.0, progress_radius: int = 0) -> dict[str, Any]:
+        teacher_radius: int = 0, teacher_weight: float = 1.0, progress_radius: int = 0,
+        progress_weight: float = 1.0) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
     draw each batch's states through the model's own augmentation (its exact symmetries), as its training did.
     ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions).
@@ -100,15 +101,15 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     the weight that keeps unlabelled allowed actions at the starting model's values (0: none).
     ``teacher_radius``: the teacher term's square around the teacher's action, in cells (0: the pixel).
     ``progress_radius``: the progress term's square around its lower action, in cells (0: the pixel).
-    ``teacher_weight``: the teacher term's weight in training (the validation loss keeps the default weights,
-    so that recipes compare)."""
+    ``teacher_weight``, ``progress_weight``: those terms' weights in training (the validation loss keeps the
+    default weights, so that recipes compare)."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     if epochs < 1 or not 0 <= val_fraction < 1:
         raise ValueError(f"need epochs >= 1 and val_fraction in [0, 1), got {epochs} and {val_fraction}")
-    if min(teacher_radius, teacher_weight, progress_radius) < 0:
-        raise ValueError(f"--teacher-radius, --teacher-weight and --progress-radius must be >= 0, got "
-                         f"{teacher_radius}, {teacher_weight} and {progress_radius}")
+    if min(teacher_radius, teacher_weight, progress_radius, progress_weight) < 0:
+        raise ValueError(f"--teacher-radius, --teacher-weight, --progress-radius and --progress-weight must be >= 0, "
+                         f"got {teacher_radius}, {teacher_weight}, {progress_radius} and {progress_weight}")
     if not pathlib.Path(init).is_file():
         raise ValueError(f"--init {init!r} does not exist")
     model = PixelDoubleDQN.load(init, device="cpu")
@@ -140,7 +141,8 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
                                                                      seed=seed + epoch, augment=transforms,
                                                                      anchor=anchor, anchor_net=anchor_net,
                                                                      teacher_radius=teacher_radius,
-                                                                     weights=(1.0, 1.0, teacher_weight, 1.0),
+                                                                     weights=(1.0, 1.0, teacher_weight,
+                                                                              progress_weight),
                                                                      progress_radius=progress_radius)[0]}
         if val is not None:
             row["val"] = evaluate(model.policy, val, margin, teacher_radius=teacher_radius,
@@ -153,7 +155,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "train_labels": len(train.label_action), "val_states": 0 if val is None else len(val.obs),
               "epochs": epochs, "augment": [repr(t) for t in transforms], "masks": masks, "progress": progress,
               "anchor": anchor, "teacher_radius": teacher_radius, "teacher_weight": teacher_weight,
-              "progress_radius": progress_radius,
+              "progress_radius": progress_radius, "progress_weight": progress_weight,
               "seconds": round(time.monotonic() - start, 1), "history": history}
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
@@ -184,6 +186,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--teacher-radius", type=int, default=0, help="the teacher's action stands for the cells of "
                    "its map within this many cells (its object rather than one pixel; 0: the pixel)")
     p.add_argument("--teacher-weight", type=float, default=1.0, help="weight of the teacher term in training")
+    p.add_argument("--progress-weight", type=float, default=1.0, help="weight of the progress term in training")
     p.add_argument("--progress-radius", type=int, default=0, help="in the progress term the lower action stands "
                    "for the allowed cells of its map within this many cells (0: the pixel)")
     args = p.parse_args(argv)
@@ -192,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
             args.margin, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
             masks=args.teacher_over == "masked", progress=not args.no_progress,
             anchor=args.anchor, teacher_radius=args.teacher_radius, teacher_weight=args.teacher_weight,
-            progress_radius=args.progress_radius)
+            progress_radius=args.progress_radius, progress_weight=args.progress_weight)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2
