@@ -36,8 +36,13 @@ def load(folder: pathlib.Path, reports_folder: pathlib.Path | None = None) -> tu
     return reports, cells
 
 
+#: The epochs of the results' distillations; a report with other epochs says so in its recipe.
+EPOCHS = 8
+
+
 def recipe(report: dict[str, Any]) -> str:
-    """A distillation's recipe in words, from its report (older reports lack the later options)."""
+    """A distillation's recipe in words, from its report (older reports lack the later options): the options
+    that differ from the defaults, epochs other than `EPOCHS`, and the shard series beyond the first."""
     parts = ["augmented" if report.get("augment") else "as stored",
              "teacher over allowed actions" if report.get("masks") else "teacher over labels"]
     if report.get("progress"):
@@ -52,6 +57,11 @@ def recipe(report: dict[str, Any]) -> str:
         parts.append(f"progress radius {report['progress_radius']}")
     if report.get("progress_weight", 1.0) != 1.0:
         parts.append(f"progress weight {report['progress_weight']:g}")
+    if report.get("epochs", EPOCHS) != EPOCHS:
+        parts.append(f"{report['epochs']} epochs")
+    series = sorted({name[:3] for name in report.get("shards", [])} - {"s00"})
+    if series:
+        parts.append("+ series " + ", ".join(series))
     return ", ".join(parts)
 
 

@@ -28,5 +28,20 @@ M=runs/distill_scaling
   --seed 0 --out results/distill_test/falls.json
 .venv/bin/python -m shelf_env.evaluation.falls $M/p_s_d440_aug_mpa.zip $M/p_s_d220_aug_mpa.zip --ns 8 5 11 \
   --runs 10 --seed 0 --out results/distill_test/falls.json
+# the heuristics with the same test-time loop breaker, so that the loop-breaker rows compare like with like
+.venv/bin/shelf-evaluate --policies h-d+loop-breaker h-a+loop-breaker \
+  --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test "$@"
 .venv/bin/python research/scaling_curve.py results/distill_test --reports results/distill_scaling \
   --out results/distill_test/scaling.md --png results/distill_test/scaling.png
+# the DAgger-series model (recipe D from the first 55 shards of series 0 and 7 of series 1), all 30 scenes per N
+[ -f $M/p_s_dagger7_aug_mpa.zip ] || bash results/distill_scaling/run.sh
+.venv/bin/shelf-evaluate --policies $M/p_s_dagger7_aug_mpa.zip \
+  --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test "$@"
+# every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
+.venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
+  h-d+loop-breaker h-a+loop-breaker $M/p_s_d52sh_aug_mpa.zip $M/p_s_dagger7_aug_mpa.zip \
+  --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
+for m in p_s_d52sh_aug_mpa p_s_dagger7_aug_mpa; do
+  .venv/bin/python -m shelf_env.evaluation.report results/distill_test --learned $m --pick-only s --heuristics h-d h-a \
+    --out results/distill_test/report_$m.md
+done
