@@ -57,6 +57,8 @@ def recipe(report: dict[str, Any]) -> str:
         parts.append(f"progress radius {report['progress_radius']}")
     if report.get("progress_weight", 1.0) != 1.0:
         parts.append(f"progress weight {report['progress_weight']:g}")
+    if report.get("teacher_temperature"):
+        parts.append(f"teacher cross-entropy at {report['teacher_temperature']:g}")
     if report.get("epochs", EPOCHS) != EPOCHS:
         parts.append(f"{report['epochs']} epochs")
     series = sorted({name[:3] for name in report.get("shards", [])} - {"s00"})

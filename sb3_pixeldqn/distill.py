@@ -176,7 +176,8 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
                       masks: th.Tensor | None = None,
                       progress: th.Tensor | None = None,
                       teacher_radius: int = 0, grid: Sequence[int] | None = None,
-                      progress_radius: int = 0) -> tuple[th.Tensor, dict[str, float]]:
+                      progress_radius: int = 0, teacher_temperature: float = 0.0) -> tuple[th.Tensor,
+                                                                                           dict[str, float]]:
     """The loss of a batch (module docstring): ``q_maps`` (B, n_actions) with gradients, labels indexing
     its rows; ``teacher`` (B,) with -1 where a state has none; ``masks`` (B, n_actions) bool, the allowed
     actions the teacher term ranges over (None: the labelled actions); ``progress`` (K,) the labels' progress
@@ -184,8 +185,13 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
     ``teacher_radius`` > 0: the teacher's action stands for its map's cells within that many cells, which
     needs ``grid`` = (n_maps, H, W), the layout of the flat actions. ``progress_radius`` > 0: in the progress
     term the lower action of a pair stands for the allowed cells of its map within that many cells (the
-    best of them must lie a margin below the higher action), which needs ``grid`` too. Returns the loss
-    and its terms."""
+    best of them must lie a margin below the higher action), which needs ``grid`` too.
+    ``teacher_temperature`` > 0 makes the teacher term a cross-entropy instead of a margin: the softmax of
+    Q / temperature over the allowed actions should put its mass on the teacher's action (its square),
+    logsumexp(allowed) − logsumexp(teacher's cells), a gradient on every allowed action rather than on the
+    two extremes. Returns the loss and its terms."""
+    if teacher_temperature < 0:
+        raise ValueError(f"teacher_temperature must be >= 0, got {teacher_temperature}")
     for name, radius in (("teacher_radius", teacher_radius), ("progress_radius", progress_radius)):
         if radius < 0 or (radius > 0 and grid is None):
             raise ValueError(f"{name} must be >= 0, and > 0 only with a grid; got {radius} and {grid}")
@@ -231,9 +237,14 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
             near[at, t] = True
         q_rows = q_maps[rows]
         none = th.full_like(q_rows, -th.inf)
-        q_near = th.where(allowed & near, q_rows, none).max(dim=1).values
-        q_out = th.where(allowed & ~near, q_rows, none).max(dim=1).values
-        teacher_loss = F.relu(q_out + margin - q_near).mean()
+        if teacher_temperature > 0:
+            logits = q_rows / teacher_temperature
+            teacher_loss = (th.where(allowed, logits, none).logsumexp(dim=1)
+                            - th.where(allowed & near, logits, none).logsumexp(dim=1)).mean()
+        else:
+            q_near = th.where(allowed & near, q_rows, none).max(dim=1).values
+            q_out = th.where(allowed & ~near, q_rows, none).max(dim=1).values
+            teacher_loss = F.relu(q_out + margin - q_near).mean()
     w_value, w_ranking, w_teacher, w_progress = weights
     loss = w_value * value_loss + w_ranking * ranking + w_teacher * teacher_loss + w_progress * progress_loss
     return loss, {"value": float(value_loss.detach()), "ranking": float(ranking.detach()),
@@ -242,7 +253,8 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
 
 def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: float,
                weights: Weights, teacher_radius: int = 0,
-               progress_radius: int = 0) -> tuple[th.Tensor, dict[str, float], th.Tensor, LabelledStates]:
+               progress_radius: int = 0, teacher_temperature: float = 0.0) -> tuple[th.Tensor, dict[str, float],
+                                                                                   th.Tensor, LabelledStates]:
     """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network, with their
     Q-maps ``(B, n_maps, H, W)`` and the subset they index."""
     sub = data.subset(states)
@@ -258,13 +270,13 @@ def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: fl
                                     None if masks is None else th.as_tensor(masks, device=device),
                                     None if sub.label_progress is None else
                                     th.as_tensor(sub.label_progress, dtype=th.float32, device=device),
-                                    teacher_radius, tuple(q_maps.shape[1:]), progress_radius)
+                                    teacher_radius, tuple(q_maps.shape[1:]), progress_radius, teacher_temperature)
     return loss, parts, q_maps, sub
 
 
 def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
              weights: Weights = DEFAULT_WEIGHTS, chunk: int = 32, teacher_radius: int = 0,
-             progress_radius: int = 0) -> dict[str, float]:
+             progress_radius: int = 0, teacher_temperature: float = 0.0) -> dict[str, float]:
     """The mean loss and its terms over every state of ``data`` (no gradients), and how often the
     network's best labelled action of a state is one that ended the episode invalid (``invalid_choice``:
     the greedy choice among the labelled actions) and, where the states carry masks, how often its masked
@@ -277,7 +289,7 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
         for start in range(0, len(data.obs), chunk):
             states = np.arange(start, min(start + chunk, len(data.obs)))
             loss, parts, q_maps, sub = batch_loss(policy, data, states, margin, weights, teacher_radius,
-                                                  progress_radius)
+                                                  progress_radius, teacher_temperature)
             totals["loss"] += float(loss) * len(states)
             for key, v in parts.items():
                 totals[key] += v * len(states)
@@ -309,7 +321,8 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
 def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
             weights: Weights = DEFAULT_WEIGHTS, seed: int = 0,
             augment: Sequence[Any] = (), anchor: float = 0.0,
-            anchor_net: Any = None, teacher_radius: int = 0, progress_radius: int = 0) -> list[dict[str, float]]:
+            anchor_net: Any = None, teacher_radius: int = 0, progress_radius: int = 0,
+            teacher_temperature: float = 0.0) -> list[dict[str, float]]:
     """Train ``model``'s online Q-network (a `PixelDoubleDQN`) on ``data`` for ``epochs`` passes with its own
     optimiser, then copy it to the target network. ``augment``: transforms each batch's states are drawn
     through (`augmented`; ``model.augment`` for the model's own). ``anchor`` > 0 adds that weight times
@@ -318,8 +331,8 @@ def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int
     first call): the labels move the actions they speak of, the rest of the map keeps what the
     starting model had learned (which objects to move, in which order). ``teacher_radius``: the teacher
     term's square around the teacher's action, ``progress_radius`` the progress term's around its lower
-    action (`distillation_loss`). Returns each epoch's mean training
-    loss and terms."""
+    action, ``teacher_temperature`` > 0 the teacher term as a cross-entropy (`distillation_loss`). Returns
+    each epoch's mean training loss and terms."""
     policy = model.policy
     data.check(tuple(model.observation_space.shape), int(model.action_space.n))
     if epochs < 1 or batch_states < 1:
@@ -338,7 +351,7 @@ def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int
             batch = augmented(batch, augment, int(model.action_space.n), rng)
             states = np.arange(len(batch.obs))
             loss, parts, q_maps, sub = batch_loss(policy, batch, states, margin, weights, teacher_radius,
-                                                  progress_radius)
+                                                  progress_radius, teacher_temperature)
             q = q_maps.flatten(1)
             if anchor > 0:
                 assert anchor_net is not None

@@ -148,11 +148,11 @@ def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(
     out = tmp_path / "distilled.zip"
     assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(out), "--epochs", "1",
                              "--val-fraction", "0", "--teacher-radius", "2", "--teacher-weight", "3",
-                             "--progress-radius", "1", "--progress-weight", "2"]) == 0
+                             "--progress-radius", "1", "--progress-weight", "2", "--teacher-temperature", "0.5"]) == 0
     report = json.loads(out.with_suffix(".distill.json").read_text())
     assert report["train_states"] == shard.num_states and report["history"][-1]["train"]["loss"] > 0
     assert report["teacher_radius"] == 2 and report["teacher_weight"] == 3.0 and report["progress_radius"] == 1
-    assert report["progress_weight"] == 2.0
+    assert report["progress_weight"] == 2.0 and report["teacher_temperature"] == 0.5
     from sb3_pixeldqn import PixelDoubleDQN
 
     assert PixelDoubleDQN.load(out).observation_space.shape == (4, 40, 60)
@@ -160,8 +160,8 @@ def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(
                              str(tmp_path / "x.zip")]) == 2
     assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(tmp_path / "x.zip"),
                              "--teacher-radius", "-1"]) == 2
-    assert "--teacher-radius, --teacher-weight, --progress-radius and --progress-weight must be >= 0" in \
-        capsys.readouterr().err
+    assert "--teacher-radius, --teacher-weight, --progress-radius, --progress-weight and --teacher-temperature must " \
+        "be >= 0" in capsys.readouterr().err
     assert not (tmp_path / "x.zip").exists()
 
 

@@ -265,3 +265,18 @@ def test_a_progress_radius_pushes_down_the_best_allowed_cell_near_a_useless_acti
     assert q.grad[0, 9] > 0 > q.grad[0, 0] and q.grad[0, 8] == 0 and q.grad[0, 13] == 0
     with pytest.raises(ValueError, match="progress_radius"):
         distillation_loss(q, *args, progress=progress, progress_radius=1)  # no grid
+
+
+def test_a_teacher_temperature_makes_the_teacher_term_a_cross_entropy_over_the_allowed_actions() -> None:
+    q = th.tensor([[1.0, 0.0, 3.0, 9.0]], requires_grad=True)
+    args = (th.tensor([0, 0]), th.tensor([0, 1]), th.tensor([False, False]), th.tensor([np.nan, np.nan]),
+            th.tensor([0]))
+    masks = th.tensor([[True, True, True, False]])
+    loss, parts = distillation_loss(q, *args, masks=masks, teacher_temperature=1.0, weights=(0.0, 0.0, 1.0, 0.0))
+    assert parts["teacher"] == pytest.approx(float(np.log(np.e + 1 + np.e ** 3) - 1.0), rel=1e-5)
+    loss.backward()
+    softmax = np.exp([1.0, 0.0, 3.0]) / np.exp([1.0, 0.0, 3.0]).sum()
+    assert q.grad[0, :3].numpy() == pytest.approx(softmax - np.array([1.0, 0.0, 0.0]), rel=1e-5)  # every allowed one
+    assert q.grad[0, 3] == 0  # not allowed: untouched
+    with pytest.raises(ValueError, match="teacher_temperature"):
+        distillation_loss(q, *args, teacher_temperature=-1.0)

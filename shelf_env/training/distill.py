@@ -93,7 +93,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         learning_rate: float | None = None, seed: int = 0, max_shards: int | str | None = None,
         augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0,
         teacher_radius: int = 0, teacher_weight: float = 1.0, progress_radius: int = 0,
-        progress_weight: float = 1.0) -> dict[str, Any]:
+        progress_weight: float = 1.0, teacher_temperature: float = 0.0) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
     draw each batch's states through the model's own augmentation (its exact symmetries), as its training did.
     ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions).
@@ -101,15 +101,17 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     the weight that keeps unlabelled allowed actions at the starting model's values (0: none).
     ``teacher_radius``: the teacher term's square around the teacher's action, in cells (0: the pixel).
     ``progress_radius``: the progress term's square around its lower action, in cells (0: the pixel).
-    ``teacher_weight``, ``progress_weight``: those terms' weights in training (the validation loss keeps the
-    default weights, so that recipes compare)."""
+    ``teacher_temperature`` > 0: the teacher term as a cross-entropy over the allowed actions at that
+    temperature (0: the margin). ``teacher_weight``, ``progress_weight``: those terms' weights in training
+    (the validation loss keeps the default weights, so that recipes compare)."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     if epochs < 1 or not 0 <= val_fraction < 1:
         raise ValueError(f"need epochs >= 1 and val_fraction in [0, 1), got {epochs} and {val_fraction}")
-    if min(teacher_radius, teacher_weight, progress_radius, progress_weight) < 0:
-        raise ValueError(f"--teacher-radius, --teacher-weight, --progress-radius and --progress-weight must be >= 0, "
-                         f"got {teacher_radius}, {teacher_weight}, {progress_radius} and {progress_weight}")
+    if min(teacher_radius, teacher_weight, progress_radius, progress_weight, teacher_temperature) < 0:
+        raise ValueError(f"--teacher-radius, --teacher-weight, --progress-radius, --progress-weight and "
+                         f"--teacher-temperature must be >= 0, got {teacher_radius}, {teacher_weight}, "
+                         f"{progress_radius}, {progress_weight} and {teacher_temperature}")
     if not pathlib.Path(init).is_file():
         raise ValueError(f"--init {init!r} does not exist")
     model = PixelDoubleDQN.load(init, device="cpu")
@@ -134,7 +136,8 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     history: list[dict[str, Any]] = []
     if val is not None:  # the starting model, for comparison
         history.append({"epoch": 0, "val": evaluate(model.policy, val, margin, teacher_radius=teacher_radius,
-                                                           progress_radius=progress_radius)})
+                                                           progress_radius=progress_radius,
+                                                           teacher_temperature=teacher_temperature)})
         print(json.dumps(history[-1]), flush=True)
     for epoch in range(epochs):
         row: dict[str, Any] = {"epoch": epoch + 1, "train": distill(model, train, 1, batch_states, margin,
@@ -143,10 +146,11 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
                                                                      teacher_radius=teacher_radius,
                                                                      weights=(1.0, 1.0, teacher_weight,
                                                                               progress_weight),
-                                                                     progress_radius=progress_radius)[0]}
+                                                                     progress_radius=progress_radius,
+                                                                     teacher_temperature=teacher_temperature)[0]}
         if val is not None:
             row["val"] = evaluate(model.policy, val, margin, teacher_radius=teacher_radius,
-                                  progress_radius=progress_radius)
+                                  progress_radius=progress_radius, teacher_temperature=teacher_temperature)
         history.append(row)
         print(json.dumps(row), flush=True)
     model.save(out)
@@ -156,6 +160,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "epochs": epochs, "augment": [repr(t) for t in transforms], "masks": masks, "progress": progress,
               "anchor": anchor, "teacher_radius": teacher_radius, "teacher_weight": teacher_weight,
               "progress_radius": progress_radius, "progress_weight": progress_weight,
+              "teacher_temperature": teacher_temperature,
               "seconds": round(time.monotonic() - start, 1), "history": history}
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
@@ -186,6 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--teacher-radius", type=int, default=0, help="the teacher's action stands for the cells of "
                    "its map within this many cells (its object rather than one pixel; 0: the pixel)")
     p.add_argument("--teacher-weight", type=float, default=1.0, help="weight of the teacher term in training")
+    p.add_argument("--teacher-temperature", type=float, default=0.0, help="> 0: the teacher term as a "
+                   "cross-entropy of the allowed actions' softmax at this temperature (0: the margin)")
     p.add_argument("--progress-weight", type=float, default=1.0, help="weight of the progress term in training")
     p.add_argument("--progress-radius", type=int, default=0, help="in the progress term the lower action stands "
                    "for the allowed cells of its map within this many cells (0: the pixel)")
@@ -195,7 +202,8 @@ def main(argv: list[str] | None = None) -> int:
             args.margin, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
             masks=args.teacher_over == "masked", progress=not args.no_progress,
             anchor=args.anchor, teacher_radius=args.teacher_radius, teacher_weight=args.teacher_weight,
-            progress_radius=args.progress_radius, progress_weight=args.progress_weight)
+            progress_radius=args.progress_radius, progress_weight=args.progress_weight,
+            teacher_temperature=args.teacher_temperature)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2
