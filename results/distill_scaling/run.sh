@@ -48,6 +48,9 @@ SHARDS=52 distil p_s_d52sh_aug_mpa_r2_t5_e24 all --anchor 1.0 --teacher-radius 2
 SHARDS=52 distil p_s_d52sh_aug_mpa_pr2 all --anchor 1.0 --progress-radius 2  # D, a useless action's square pushed down
 # D from the first 55 shards of series 0 and the first 7 of series 1 (DAgger: driven by p_s_d52sh_aug_mpa, explore 1)
 SHARDS=s00:55,s01:7 distil p_s_dagger7_aug_mpa all --anchor 1.0
+SHARDS=s00:55,s01:7 distil p_s_dagger7_aug_mpa_pr2_p5 all --anchor 1.0 --progress-radius 2 --progress-weight 5
+# ... with the teacher term as a cross-entropy of the allowed actions' softmax (temperature 1) on its 5 x 5 square
+SHARDS=s00:55,s01:7 distil p_s_dagger7_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
 
 # B + 45 min of PixelDoubleDQN with the dataset as demonstrations (the data/teacher of the time: 37 shards)
 if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then
@@ -65,5 +68,5 @@ ps=examples/pretrained/p_s.zip
   "$ps+loop-breaker" h-d --ns 5 11 --runs 10 --seed 2000 --out "$DIR/falls.json"
 "$PY" -m shelf_env.evaluation.falls "$M/p_s_d52sh_aug_mpa.zip" "$M/p_s_d52sh_aug_mpa_r2.zip" \
   "$M/p_s_d52sh_aug_mpa_r2_t5.zip" "$M/p_s_d52sh_aug_mpa_r2_t5_e24.zip" "$M/p_s_d52sh_aug_mpa_pr2.zip" \
-  "$M/p_s_dagger7_aug_mpa.zip" --ns 8 --runs 10 --seed 2000 --out "$DIR/falls.json"
+  "$M/p_s_dagger7_aug_mpa.zip" "$M/p_s_dagger7_aug_mpa_pr2_p5.zip" "$M/p_s_dagger7_aug_mpa_r2_ce1.zip" --ns 8 --runs 10 --seed 2000 --out "$DIR/falls.json"
 "$PY" research/scaling_curve.py "$DIR" --out "$DIR/report.md" --png "$DIR/scaling.png"
