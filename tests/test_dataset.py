@@ -247,3 +247,16 @@ def test_driver_progress_counts_the_greedy_and_teacher_labels_of_each_state(one_
     assert row["greedy_progress"] == int((a["label_valid"] & (a["label_dsorted"] > 0))[greedy].sum())
     assert row["greedy_progress"] <= row["valid"] and row["teacher_progress"] <= row["any_progress"] <= row["states"]
     assert f"| s00 | p_s.zip ({row['sha256']}) | {shard.num_states} |" in driver_progress.table({"s00": row})
+
+
+def test_distillation_refuses_a_later_shard_of_another_layout_by_name(one_shard: pathlib.Path, tmp_path: pathlib.Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    from shelf_env.training import distill as distill_cli
+
+    good = dataset.shard_path(one_shard, 0, 0)
+    (tmp_path / good.name).write_bytes(good.read_bytes())
+    layout = dict(dataset.load_shard(good).meta["layout"], pixel_size=0.005)
+    other = rewrite(good, tmp_path / "s01_00000.npz", layout=layout)
+    assert distill_cli.main(["--data", str(tmp_path), "--init", MODEL, "--out", str(tmp_path / "x.zip")]) == 2
+    assert f"dataset shard {other}: observation layout" in capsys.readouterr().err
+    assert not (tmp_path / "x.zip").exists()

@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import hashlib
 import json
 import multiprocessing
 import os
@@ -65,6 +64,7 @@ from shelf_env.actions import PRIMITIVES
 from shelf_env.baselines.heuristics import ObservationView
 from shelf_env.camera.heightmap import observation_masks
 from shelf_env.env import DYNAMICS_VERSION
+from shelf_env.evaluation.protocol import policy_digest
 from shelf_env.files import write_atomically
 from shelf_env.policies import POLICIES, masked_greedy
 from shelf_env.privileged.lookahead import LookaheadHeuristic, Outcome, probe_step
@@ -450,7 +450,7 @@ def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence
         if not pathlib.Path(model_path).is_file():
             raise ValueError(f"driving model {model_path!r} does not exist")
         model = PixelDoubleDQN.load(model_path, device="cpu")
-        model_sha256 = hashlib.sha256(pathlib.Path(model_path).read_bytes()).hexdigest()
+        model_sha256 = policy_digest(model_path)
     env = gym.make("ShelfSort-v0", num_objects=max(ns), object_set=object_set, primitives=PRIMITIVES,
                    pixel_size=PIXEL_SIZE)
     start, written, shard = time.monotonic(), 0, 0

@@ -118,12 +118,14 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     if learning_rate is not None:
         for group in model.policy.optimizer.param_groups:
             group["lr"] = learning_rate
-    shards = select_shards(dataset.load_dataset(data), max_shards)  # a growing dataset's past
-    stored = shards[0].meta["layout"]
-    if list(stored["obs_shape"]) != list(model.observation_space.shape) or \
-            len(stored["map_names"]) != model.policy.n_maps:
+    files = dataset.shard_files(data)
+    stored = dataset.load_shard(files[0]).meta["layout"] if files else None
+    if stored is not None and (list(stored["obs_shape"]) != list(model.observation_space.shape)
+                               or len(stored["map_names"]) != model.policy.n_maps):
         raise ValueError(f"{init} takes observations {list(model.observation_space.shape)} and {model.policy.n_maps} "
                          f"maps; the dataset's are {stored['obs_shape']} and {stored['map_names']}")
+    # every shard in the first one's layout (`load_shard`'s check, naming the shard), then a growing dataset's past
+    shards = select_shards(dataset.load_dataset(data, expect_layout=stored), max_shards)
     labelled = dataset.labelled_states(shards, masks=masks, progress=progress)
     train_idx, val_idx = split_by_scene(shards, val_fraction)
     if max_states is not None:
