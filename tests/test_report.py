@@ -1,4 +1,4 @@
-"""Issue 10's verdict (shelf_env.evaluation.report) on hand-made results: margins, misses and bad input."""
+"""The §V verdict (shelf_env.evaluation.report) on hand-made results: margins, misses and bad input."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ def test_margins_and_misses_are_computed_per_n(tmp_path):
     assert ("| 8 | 30.0 ± 1.0 | 10.0 ± 1.0 | 40.0 ± 1.0 | 20.0 ± 1.0 | h-d | -10.0 | 0.80 | 0.90 | 60 "
             "| 60 / 0 / 10 / 0 / 0 |") in text
     assert "**missed** at N = 8" in text
-    assert "averaged over N = 3..8: -2.5 SR points (target ≥ +30: **missed**)" in text
+    assert "averaged over N = 3..8: -2.5 SR points (target ≥ +15: **missed**)" in text
     assert "p_s ≥ s averaged over N: 65.0 vs 45.0 (met)" in text
     # AE: p_s 1.0 vs the heuristics' best per N (1.5, 0.9) = 1.2 on average, lower at both N
     assert "1.00 vs 1.20 (**missed**; lower at N = 3, 8)" in text
@@ -49,7 +49,7 @@ def test_the_targets_met_and_s_not_evaluated(tmp_path):
           + [(h, n, 50, 1.0, 0.3) for h in ("h-d", "h-a") for n in (3, 4)] + [("h-d", 5, 99, 1.0, 0.0)])
     assert rp.main([str(tmp_path), "--out", str(tmp_path / "r.md")]) == 0
     text = (tmp_path / "r.md").read_text()
-    assert "at every N: met" in text and "+45.0 SR points (target ≥ +30: met)" in text
+    assert "at every N: met" in text and "+45.0 SR points (target ≥ +15: met)" in text
     assert "not evaluated (s has no results)" in text and "(met)" in text
     assert "| 3 | 95.0 ± 1.0 | - | 50.0 ± 1.0 |" in text
     # N = 5 lacks h-a (an evaluation in progress): shown as pending, not judged
@@ -69,3 +69,17 @@ def test_bad_input_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "report.md").exists()
     with pytest.raises(ValueError, match="no rows for object set 'train'"):
         rp.read_rows(tmp_path, "train")
+
+
+def test_the_margin_target_is_issue_38s_and_can_be_set(tmp_path, capsys):
+    """+20 points over the best heuristic meets issue 38's +15, not issue 10's +30 (``--target-margin 30``)."""
+    write(tmp_path, [("p_s", 3, 70, 1.0, 0.0), ("h-d", 3, 50, 1.0, 0.3), ("h-a", 3, 40, 1.0, 0.3)])
+    assert rp.main([str(tmp_path)]) == 0
+    assert "averaged over N = 3..3: +20.0 SR points (target ≥ +15: met)" in (tmp_path / "report.md").read_text()
+    assert rp.main([str(tmp_path), "--target-margin", "30", "--out", str(tmp_path / "r30.md")]) == 0
+    assert "+20.0 SR points (target ≥ +30: **missed**)" in (tmp_path / "r30.md").read_text()
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        rp.main([str(tmp_path), "--target-margin", "nan", "--out", str(tmp_path / "bad.md")])
+    assert "--target-margin must be a finite number" in capsys.readouterr().err
+    assert not (tmp_path / "bad.md").exists()

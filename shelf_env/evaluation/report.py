@@ -1,14 +1,15 @@
-"""Issue 10's verdict from an evaluation folder: the learned policy against the heuristics, per N.
+"""The §V verdict from an evaluation folder: the learned policy against the heuristics, per N.
 
     python -m shelf_env.evaluation.report results/models            # writes results/models/report.md
 
 Reads ``<folder>/results.csv`` (written by ``shelf-evaluate``) and writes ``report.md``: one table
 row per N (SR of every policy, the best heuristic, the learned policy's margin over it, AE, fall
-rate and why its failed episodes failed) and the targets of §V as issue 10 states them, each with
-its measured value and, where missed, the N at which it is missed:
+rate and why its failed episodes failed) and the targets of §V as issue 38 restates issue 10's, each
+with its measured value and, where missed, the N at which it is missed:
 
 - the learned policy (P+S) >= the best heuristic at every N;
-- P+S - best heuristic >= +30 SR points, averaged over N;
+- P+S - best heuristic >= +15 SR points, averaged over N (``--target-margin``; issue 10 asked +30, out
+  of reach even of a privileged one-step lookahead, +29.2; issue 38 restated it as +15);
 - P+S >= the pick-only S, averaged over N;
 - P+S's AE >= the heuristics' (averaged over the N where both sorted something).
 
@@ -28,8 +29,9 @@ from collections.abc import Sequence
 from shelf_env.evaluation.protocol import FAILURES
 from shelf_env.files import write_atomically
 
-#: The SR margin (points, averaged over N) the learned policy must have over the best heuristic.
-TARGET_MARGIN = 30.0
+#: The SR margin (points, averaged over N) the learned policy must have over the best heuristic: issue 38's
+#: (issue 10's +30, restated).
+TARGET_MARGIN = 15.0
 
 
 def _float(value: str | None) -> float:
@@ -66,8 +68,10 @@ def _mean(values: Sequence[float]) -> float:
 
 
 def report(rows: dict[tuple[str, int], dict[str, float]], learned: str = "p_s", pick_only: str = "s",
-           heuristics: Sequence[str] = ("h-d", "h-a"), title: str = "") -> str:
-    """The markdown report (table and targets) of ``learned`` against ``heuristics`` and ``pick_only``."""
+           heuristics: Sequence[str] = ("h-d", "h-a"), title: str = "",
+           target_margin: float = TARGET_MARGIN) -> str:
+    """The markdown report (table and targets) of ``learned`` against ``heuristics`` and ``pick_only``;
+    ``target_margin``: the SR points over the best heuristic, averaged over N, that the learned policy needs."""
     own = sorted({n for p, n in rows if p == learned})
     if not own:
         raise ValueError(f"no results of the learned policy {learned!r} (policies: "
@@ -109,11 +113,11 @@ def report(rows: dict[tuple[str, int], dict[str, float]], learned: str = "p_s", 
     avg_margin = _mean(margins)
     if pending:
         lines += ["", f"Not judged yet (the heuristics have no results there): N = {', '.join(map(str, pending))}."]
-    lines += ["", f"Targets (issue 10, §V), over N = {', '.join(map(str, ns))}:", ""]
+    lines += ["", f"Targets (§V, as issue 38 restates issue 10's), over N = {', '.join(map(str, ns))}:", ""]
     lines.append(f"- {learned} ≥ best heuristic at every N: "
                  + ("met" if not misses else f"**missed** at N = {', '.join(map(str, misses))}"))
     lines.append(f"- {learned} − best heuristic averaged over N = {ns[0]}..{ns[-1]}: {avg_margin:+.1f} SR points "
-                 + ("(target ≥ +30: met)" if avg_margin >= TARGET_MARGIN else "(target ≥ +30: **missed**)"))
+                 + f"(target ≥ {target_margin:+g}: " + ("met)" if avg_margin >= target_margin else "**missed**)"))
     if any((pick_only, n) in rows for n in ns):
         ours = _mean([get(learned, n, "sr_mean") for n in ns if (pick_only, n) in rows])
         theirs = _mean([get(pick_only, n, "sr_mean") for n in ns if (pick_only, n) in rows])
@@ -140,12 +144,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--heuristics", nargs="+", default=["h-d", "h-a"],
                         help="the heuristic policies (labels) the learned one is judged against")
     parser.add_argument("--object-set", default="ycb", help="which object set's rows to report (ycb or train)")
+    parser.add_argument("--target-margin", type=float, default=TARGET_MARGIN,
+                        help=f"SR points over the best heuristic, averaged over N, the learned policy needs "
+                             f"(default {TARGET_MARGIN:g}, issue 38's)")
     parser.add_argument("--out", type=pathlib.Path, default=None, help="default <folder>/report.md")
     args = parser.parse_args(argv)
+    if not math.isfinite(args.target_margin):
+        parser.error(f"--target-margin must be a finite number, got {args.target_margin}")
     try:
         text = report(read_rows(args.folder, args.object_set), args.learned, args.pick_only, args.heuristics,
                       title=f"{args.learned} vs {', '.join([args.pick_only, *args.heuristics])}, "
-                            f"{args.object_set} objects ({args.folder})")
+                            f"{args.object_set} objects ({args.folder})", target_margin=args.target_margin)
     except ValueError as err:
         print(f"report: error: {err}", file=sys.stderr)
         return 2
