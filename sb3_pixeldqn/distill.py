@@ -46,6 +46,7 @@ It knows nothing of shelves: actions are flat indices of the policy's maps.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,6 +58,42 @@ import torch.nn.functional as F
 #: Weights of the value, ranking, teacher and progress terms.
 Weights = tuple[float, float, float, float]
 DEFAULT_WEIGHTS: Weights = (1.0, 1.0, 1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class LossOptions:
+    """How `distillation_loss` reads a batch's labels (module docstring): one value for training, evaluation
+    and a run's report, instead of the same five arguments threaded through every layer.
+
+    - ``margin``: the ranking, progress and teacher terms' margin;
+    - ``weights``: of the value, ranking, teacher and progress terms;
+    - ``teacher_radius``: the teacher's action stands for its map's cells within that many cells (0: the pixel);
+    - ``progress_radius``: the lower action of a progress pair stands for the allowed cells of its map within
+      that many cells (0: the pixel);
+    - ``teacher_temperature`` > 0: the teacher term as a cross-entropy at that temperature (0: the margin).
+
+    Refuses negative or non-finite values by name."""
+
+    margin: float = 1.0
+    weights: Weights = DEFAULT_WEIGHTS
+    teacher_radius: int = 0
+    progress_radius: int = 0
+    teacher_temperature: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "weights", tuple(float(w) for w in self.weights))
+        for name in ("margin", "teacher_radius", "progress_radius", "teacher_temperature"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+        for name in ("teacher_radius", "progress_radius"):
+            if int(getattr(self, name)) != getattr(self, name):
+                raise ValueError(f"{name} must be a whole number of cells, got {getattr(self, name)}")
+        if len(self.weights) != 4:
+            raise ValueError(f"weights must be 4 numbers (value, ranking, teacher, progress), got {self.weights}")
+        for term, w in zip(("value", "ranking", "teacher", "progress"), self.weights):
+            if not (math.isfinite(w) and w >= 0):
+                raise ValueError(f"the {term} weight must be a finite number >= 0, got {w}")
 
 
 @dataclass
@@ -171,30 +208,25 @@ def near_cells(actions: th.Tensor, grid: Sequence[int], radius: int) -> th.Tenso
 
 
 def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
-                      value: th.Tensor, teacher: th.Tensor, margin: float = 1.0,
-                      weights: Weights = DEFAULT_WEIGHTS,
-                      masks: th.Tensor | None = None,
-                      progress: th.Tensor | None = None,
-                      teacher_radius: int = 0, grid: Sequence[int] | None = None,
-                      progress_radius: int = 0, teacher_temperature: float = 0.0) -> tuple[th.Tensor,
-                                                                                           dict[str, float]]:
-    """The loss of a batch (module docstring): ``q_maps`` (B, n_actions) with gradients, labels indexing
-    its rows; ``teacher`` (B,) with -1 where a state has none; ``masks`` (B, n_actions) bool, the allowed
-    actions the teacher term ranges over (None: the labelled actions); ``progress`` (K,) the labels' progress
-    scores (None: no progress term). ``weights``: of the value, ranking, teacher and progress terms.
-    ``teacher_radius`` > 0: the teacher's action stands for its map's cells within that many cells, which
-    needs ``grid`` = (n_maps, H, W), the layout of the flat actions. ``progress_radius`` > 0: in the progress
-    term the lower action of a pair stands for the allowed cells of its map within that many cells (the
-    best of them must lie a margin below the higher action), which needs ``grid`` too.
-    ``teacher_temperature`` > 0 makes the teacher term a cross-entropy instead of a margin: the softmax of
-    Q / temperature over the allowed actions should put its mass on the teacher's action (its square),
-    logsumexp(allowed) − logsumexp(teacher's cells), a gradient on every allowed action rather than on the
-    two extremes. Returns the loss and its terms."""
-    if teacher_temperature < 0:
-        raise ValueError(f"teacher_temperature must be >= 0, got {teacher_temperature}")
+                      value: th.Tensor, teacher: th.Tensor, options: LossOptions = LossOptions(),
+                      masks: th.Tensor | None = None, progress: th.Tensor | None = None,
+                      grid: Sequence[int] | None = None) -> tuple[th.Tensor, dict[str, float]]:
+    """The loss of a batch (module docstring) under ``options``: ``q_maps`` (B, n_actions) with gradients,
+    labels indexing its rows; ``teacher`` (B,) with -1 where a state has none; ``masks`` (B, n_actions) bool,
+    the allowed actions the teacher term ranges over (None: the labelled actions); ``progress`` (K,) the
+    labels' progress scores (None: no progress term); ``grid`` = (n_maps, H, W), the layout of the flat
+    actions, which a teacher or progress radius > 0 needs to place its square. With
+    ``options.progress_radius`` > 0 the best allowed cell near a pair's lower action must lie a margin below
+    the higher action. With ``options.teacher_temperature`` > 0 the teacher term is a cross-entropy instead
+    of a margin: the softmax of Q / temperature over the allowed actions should put its mass on the
+    teacher's action (its square), logsumexp(allowed) − logsumexp(teacher's cells), a gradient on every
+    allowed action rather than on the two extremes. Returns the loss and its terms."""
+    margin, teacher_radius, progress_radius = options.margin, options.teacher_radius, options.progress_radius
+    teacher_temperature = options.teacher_temperature
     for name, radius in (("teacher_radius", teacher_radius), ("progress_radius", progress_radius)):
-        if radius < 0 or (radius > 0 and grid is None):
-            raise ValueError(f"{name} must be >= 0, and > 0 only with a grid; got {radius} and {grid}")
+        if radius > 0 and grid is None:
+            raise ValueError(f"{name} > 0 needs the grid of the flat actions to place its square; got {radius} "
+                             f"and no grid")
     qa = q_maps[label_state, label_action]
     zero = q_maps.sum() * 0.0
     known = ~th.isnan(value)
@@ -245,16 +277,14 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
             q_near = th.where(allowed & near, q_rows, none).max(dim=1).values
             q_out = th.where(allowed & ~near, q_rows, none).max(dim=1).values
             teacher_loss = F.relu(q_out + margin - q_near).mean()
-    w_value, w_ranking, w_teacher, w_progress = weights
+    w_value, w_ranking, w_teacher, w_progress = options.weights
     loss = w_value * value_loss + w_ranking * ranking + w_teacher * teacher_loss + w_progress * progress_loss
     return loss, {"value": float(value_loss.detach()), "ranking": float(ranking.detach()),
                   "teacher": float(teacher_loss.detach()), "progress": float(progress_loss.detach())}
 
 
-def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: float,
-               weights: Weights, teacher_radius: int = 0,
-               progress_radius: int = 0, teacher_temperature: float = 0.0) -> tuple[th.Tensor, dict[str, float],
-                                                                                   th.Tensor, LabelledStates]:
+def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray,
+               options: LossOptions) -> tuple[th.Tensor, dict[str, float], th.Tensor, LabelledStates]:
     """`distillation_loss` of the states ``states`` of ``data`` under ``policy``'s online network, with their
     Q-maps ``(B, n_maps, H, W)`` and the subset they index."""
     sub = data.subset(states)
@@ -266,30 +296,29 @@ def batch_loss(policy: Any, data: LabelledStates, states: np.ndarray, margin: fl
     masks = sub.unpacked_masks(q.shape[1])
     loss, parts = distillation_loss(q, label_state, label_action, th.as_tensor(sub.label_invalid, device=device),
                                     th.as_tensor(sub.label_value, dtype=th.float32, device=device),
-                                    th.as_tensor(sub.teacher_action, device=device), margin, weights,
+                                    th.as_tensor(sub.teacher_action, device=device), options,
                                     None if masks is None else th.as_tensor(masks, device=device),
                                     None if sub.label_progress is None else
                                     th.as_tensor(sub.label_progress, dtype=th.float32, device=device),
-                                    teacher_radius, tuple(q_maps.shape[1:]), progress_radius, teacher_temperature)
+                                    tuple(q_maps.shape[1:]))
     return loss, parts, q_maps, sub
 
 
-def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
-             weights: Weights = DEFAULT_WEIGHTS, chunk: int = 32, teacher_radius: int = 0,
-             progress_radius: int = 0, teacher_temperature: float = 0.0) -> dict[str, float]:
-    """The mean loss and its terms over every state of ``data`` (no gradients), and how often the
+def evaluate(policy: Any, data: LabelledStates, options: LossOptions = LossOptions(),
+             chunk: int = 32) -> dict[str, float]:
+    """The mean loss (under ``options``) and its terms over every state of ``data`` (no gradients), and how often the
     network's best labelled action of a state is one that ended the episode invalid (``invalid_choice``:
     the greedy choice among the labelled actions) and, where the states carry masks, how often its masked
     argmax over every action is the teacher's action (``teacher_choice``) and, with ``teacher_radius`` > 0,
-    lies within that many cells of it on its map (``teacher_near``)."""
+    lies within ``options.teacher_radius`` cells of it on its map (``teacher_near``, where that radius is > 0)."""
+    teacher_radius = options.teacher_radius
     totals: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0, "progress": 0.0}
     invalid_choices = chosen = agree = near = taught = 0
     policy.set_training_mode(False)
     with th.no_grad():
         for start in range(0, len(data.obs), chunk):
             states = np.arange(start, min(start + chunk, len(data.obs)))
-            loss, parts, q_maps, sub = batch_loss(policy, data, states, margin, weights, teacher_radius,
-                                                  progress_radius, teacher_temperature)
+            loss, parts, q_maps, sub = batch_loss(policy, data, states, options)
             totals["loss"] += float(loss) * len(states)
             for key, v in parts.items():
                 totals[key] += v * len(states)
@@ -318,21 +347,17 @@ def evaluate(policy: Any, data: LabelledStates, margin: float = 1.0,
     return out
 
 
-def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16, margin: float = 1.0,
-            weights: Weights = DEFAULT_WEIGHTS, seed: int = 0,
-            augment: Sequence[Any] = (), anchor: float = 0.0,
-            anchor_net: Any = None, teacher_radius: int = 0, progress_radius: int = 0,
-            teacher_temperature: float = 0.0) -> list[dict[str, float]]:
+def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int = 16,
+            options: LossOptions = LossOptions(), seed: int = 0, augment: Sequence[Any] = (), anchor: float = 0.0,
+            anchor_net: Any = None) -> list[dict[str, float]]:
     """Train ``model``'s online Q-network (a `PixelDoubleDQN`) on ``data`` for ``epochs`` passes with its own
     optimiser, then copy it to the target network. ``augment``: transforms each batch's states are drawn
     through (`augmented`; ``model.augment`` for the model's own). ``anchor`` > 0 adds that weight times
     the **anchor** term: Huber(Q(s, a), Q_0(s, a)) over every allowed action of a state that no label
     covers, Q_0 being ``anchor_net`` (a frozen copy of the starting Q-network, e.g. made once before the
     first call): the labels move the actions they speak of, the rest of the map keeps what the
-    starting model had learned (which objects to move, in which order). ``teacher_radius``: the teacher
-    term's square around the teacher's action, ``progress_radius`` the progress term's around its lower
-    action, ``teacher_temperature`` > 0 the teacher term as a cross-entropy (`distillation_loss`). Returns
-    each epoch's mean training loss and terms."""
+    starting model had learned (which objects to move, in which order). ``options``: the loss's margin,
+    weights, radii and temperature (`LossOptions`). Returns each epoch's mean training loss and terms."""
     policy = model.policy
     data.check(tuple(model.observation_space.shape), int(model.action_space.n))
     if epochs < 1 or batch_states < 1:
@@ -350,8 +375,7 @@ def distill(model: Any, data: LabelledStates, epochs: int = 1, batch_states: int
             batch = data.subset(order[start:start + batch_states])
             batch = augmented(batch, augment, int(model.action_space.n), rng)
             states = np.arange(len(batch.obs))
-            loss, parts, q_maps, sub = batch_loss(policy, batch, states, margin, weights, teacher_radius,
-                                                  progress_radius, teacher_temperature)
+            loss, parts, q_maps, sub = batch_loss(policy, batch, states, options)
             q = q_maps.flatten(1)
             if anchor > 0:
                 assert anchor_net is not None

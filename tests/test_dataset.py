@@ -152,7 +152,7 @@ def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(
     report = json.loads(out.with_suffix(".distill.json").read_text())
     assert report["train_states"] == shard.num_states and report["history"][-1]["train"]["loss"] > 0
     assert report["teacher_radius"] == 2 and report["teacher_weight"] == 3.0 and report["progress_radius"] == 1
-    assert report["progress_weight"] == 2.0 and report["teacher_temperature"] == 0.5
+    assert report["progress_weight"] == 2.0 and report["teacher_temperature"] == 0.5 and report["margin"] == 1.0
     from sb3_pixeldqn import PixelDoubleDQN
 
     assert PixelDoubleDQN.load(out).observation_space.shape == (4, 40, 60)
@@ -160,8 +160,10 @@ def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(
                              str(tmp_path / "x.zip")]) == 2
     assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(tmp_path / "x.zip"),
                              "--teacher-radius", "-1"]) == 2
-    assert "--teacher-radius, --teacher-weight, --progress-radius, --progress-weight and --teacher-temperature must " \
-        "be >= 0" in capsys.readouterr().err
+    assert "teacher_radius must be a finite number >= 0, got -1" in capsys.readouterr().err
+    assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(tmp_path / "x.zip"),
+                             "--progress-weight", "-2"]) == 2
+    assert "the progress weight must be a finite number >= 0, got -2.0" in capsys.readouterr().err
     assert not (tmp_path / "x.zip").exists()
 
 

@@ -9,7 +9,7 @@ import torch as th
 from pixel_envs import FindTheSquareEnv
 
 from sb3_pixeldqn import PixelDoubleDQN
-from sb3_pixeldqn.distill import LabelledStates, distill, distillation_loss, evaluate
+from sb3_pixeldqn.distill import LabelledStates, LossOptions, distill, distillation_loss, evaluate
 
 
 def crafted(n_states: int = 24, seed: int = 0) -> tuple[PixelDoubleDQN, LabelledStates]:
@@ -65,7 +65,7 @@ def test_the_loss_terms_are_what_the_docstring_says() -> None:
     action = th.tensor([0, 1, 2])
     invalid = th.tensor([False, True, False])
     value = th.tensor([float("nan"), -10.0, float("nan")])
-    loss, parts = distillation_loss(q, state, action, invalid, value, th.tensor([0]), margin=1.0)
+    loss, parts = distillation_loss(q, state, action, invalid, value, th.tensor([0]), LossOptions(margin=1.0))
     assert parts["value"] == pytest.approx(7.5)  # Huber(-2, -10) with delta 1
     # valid 0 vs invalid -2: relu(-2 + 1 - 0) = 0; valid 1 vs invalid -2: 0
     assert parts["ranking"] == 0.0
@@ -139,9 +139,9 @@ def test_with_masks_the_teacher_margin_spans_every_allowed_action() -> None:
     q = th.tensor([[1.0, 0.0, 3.0, 9.0]], requires_grad=True)
     args = (th.tensor([0, 0]), th.tensor([0, 1]), th.tensor([False, False]), th.tensor([np.nan, np.nan]),
             th.tensor([0]))
-    _, over_labels = distillation_loss(q, *args, margin=1.0)
+    _, over_labels = distillation_loss(q, *args)
     masks = th.tensor([[True, True, True, False]])
-    loss, over_masks = distillation_loss(q, *args, margin=1.0, masks=masks)
+    loss, over_masks = distillation_loss(q, *args, masks=masks)
     assert over_labels["teacher"] == pytest.approx(0.0)  # 1 >= 0 + margin among the labelled actions
     assert over_masks["teacher"] == pytest.approx(3.0)  # (3 + 1) - 1: the allowed unlabelled action counts
     loss.backward()
@@ -153,8 +153,8 @@ def test_the_progress_term_ranks_valid_actions_by_what_they_achieved() -> None:
     q = th.tensor([[0.0, 0.5, 3.0]], requires_grad=True)
     args = (th.tensor([0, 0, 0]), th.tensor([0, 1, 2]), th.tensor([False, False, True]), th.full((3,), np.nan),
             th.tensor([-1]))
-    _, without = distillation_loss(q, *args, margin=1.0)
-    loss, parts = distillation_loss(q, *args, margin=1.0, progress=th.tensor([1.0, 0.0, 5.0]))
+    _, without = distillation_loss(q, *args)
+    loss, parts = distillation_loss(q, *args, progress=th.tensor([1.0, 0.0, 5.0]))
     assert without["progress"] == 0.0
     assert parts["progress"] == pytest.approx(1.5)  # relu(0.5 + 1 - 0); the invalid action's score is ignored
     loss.backward()
@@ -205,17 +205,17 @@ def test_a_teacher_radius_makes_the_teachers_neighbourhood_compete_with_the_rest
     args = (th.tensor([0]), th.tensor([6]), th.tensor([False]), th.tensor([np.nan]), th.tensor([6]))
     masks = th.zeros((1, 15), dtype=th.bool)
     masks[0, [6, 7, 9]] = True
-    _, pixel = distillation_loss(q, *args, margin=1.0, masks=masks)
-    loss, square = distillation_loss(q, *args, margin=1.0, masks=masks, teacher_radius=1, grid=(1, 3, 5))
+    _, pixel = distillation_loss(q, *args, masks=masks)
+    loss, square = distillation_loss(q, *args, LossOptions(teacher_radius=1), masks=masks, grid=(1, 3, 5))
     assert pixel["teacher"] == pytest.approx(2.5)  # (2.5 + 1) - 1: the neighbour is the competitor
     assert square["teacher"] == pytest.approx(0.5)  # (2 + 1) - 2.5: the far cell against the square's best
     loss.backward()
     assert q.grad[0, 7] < 0 < q.grad[0, 9] and q.grad[0, 6] == 0  # the square's best up, the far cell down
-    _, outside_the_mask = distillation_loss(q, *args, margin=1.0, masks=masks & (th.arange(15) != 9),
-                                            teacher_radius=1, grid=(1, 3, 5))
+    _, outside_the_mask = distillation_loss(q, *args, LossOptions(teacher_radius=1),
+                                            masks=masks & (th.arange(15) != 9), grid=(1, 3, 5))
     assert outside_the_mask["teacher"] == 0.0  # nothing allowed outside the square: nothing to beat
-    with pytest.raises(ValueError, match="teacher_radius"):
-        distillation_loss(q, *args, teacher_radius=1)  # no grid to place the square on
+    with pytest.raises(ValueError, match="teacher_radius > 0 needs the grid"):
+        distillation_loss(q, *args, LossOptions(teacher_radius=1))  # no grid to place the square on
 
 
 def test_teacher_near_counts_greedy_actions_within_the_radius() -> None:
@@ -225,9 +225,9 @@ def test_teacher_near_counts_greedy_actions_within_the_radius() -> None:
     with th.no_grad():
         for p in model.q_net.parameters():
             p.zero_()  # a flat map: the masked argmax is action 0, row 0 col 0, for every state
-    report = evaluate(model.policy, masked, teacher_radius=30)
+    report = evaluate(model.policy, masked, LossOptions(teacher_radius=30))
     assert report["teacher_near"] == 1.0  # a square this large holds the whole map
-    far = evaluate(model.policy, masked, teacher_radius=1)
+    far = evaluate(model.policy, masked, LossOptions(teacher_radius=1))
     rows, cols = masked.teacher_action // 20, masked.teacher_action % 20
     assert far["teacher_near"] == pytest.approx(float(np.mean((rows <= 1) & (cols <= 1))))
     assert "teacher_near" not in evaluate(model.policy, masked)
@@ -238,7 +238,7 @@ def test_the_weights_choose_what_training_fits() -> None:
     for name, weights in (("none", (0.0, 0.0, 0.0, 0.0)), ("teacher", (0.0, 0.0, 1.0, 0.0))):
         model, data = crafted(n_states=16)
         th.manual_seed(0)
-        distill(model, data, epochs=15, batch_states=8, weights=weights)
+        distill(model, data, epochs=15, batch_states=8, options=LossOptions(weights=weights))
         reports[name] = evaluate(model.policy, data)
     start = evaluate(crafted(n_states=16)[0].policy, crafted(n_states=16)[1])
     assert reports["teacher"]["teacher"] < 0.5 * start["teacher"]  # the teacher term alone fits the teacher
@@ -256,15 +256,15 @@ def test_a_progress_radius_pushes_down_the_best_allowed_cell_near_a_useless_acti
     progress = th.tensor([1.0, 0.0])
     masks = th.ones((1, 15), dtype=th.bool)
     masks[0, 13] = False
-    _, pixel = distillation_loss(q, *args, margin=1.0, masks=masks, progress=progress)
-    loss, square = distillation_loss(q, *args, margin=1.0, masks=masks, progress=progress, progress_radius=1,
+    _, pixel = distillation_loss(q, *args, masks=masks, progress=progress)
+    loss, square = distillation_loss(q, *args, LossOptions(progress_radius=1), masks=masks, progress=progress,
                                      grid=(1, 3, 5))
     assert pixel["progress"] == pytest.approx(0.0)  # 0.5 + 1 <= 2: the labelled pixel alone is low enough
     assert square["progress"] == pytest.approx(0.8)  # 1.8 + 1 - 2: its allowed neighbour is not
     loss.backward()
     assert q.grad[0, 9] > 0 > q.grad[0, 0] and q.grad[0, 8] == 0 and q.grad[0, 13] == 0
-    with pytest.raises(ValueError, match="progress_radius"):
-        distillation_loss(q, *args, progress=progress, progress_radius=1)  # no grid
+    with pytest.raises(ValueError, match="progress_radius > 0 needs the grid"):
+        distillation_loss(q, *args, LossOptions(progress_radius=1), progress=progress)  # no grid
 
 
 def test_a_teacher_temperature_makes_the_teacher_term_a_cross_entropy_over_the_allowed_actions() -> None:
@@ -272,11 +272,23 @@ def test_a_teacher_temperature_makes_the_teacher_term_a_cross_entropy_over_the_a
     args = (th.tensor([0, 0]), th.tensor([0, 1]), th.tensor([False, False]), th.tensor([np.nan, np.nan]),
             th.tensor([0]))
     masks = th.tensor([[True, True, True, False]])
-    loss, parts = distillation_loss(q, *args, masks=masks, teacher_temperature=1.0, weights=(0.0, 0.0, 1.0, 0.0))
+    loss, parts = distillation_loss(q, *args, LossOptions(weights=(0.0, 0.0, 1.0, 0.0), teacher_temperature=1.0),
+                                    masks=masks)
     assert parts["teacher"] == pytest.approx(float(np.log(np.e + 1 + np.e ** 3) - 1.0), rel=1e-5)
     loss.backward()
     softmax = np.exp([1.0, 0.0, 3.0]) / np.exp([1.0, 0.0, 3.0]).sum()
     assert q.grad[0, :3].numpy() == pytest.approx(softmax - np.array([1.0, 0.0, 0.0]), rel=1e-5)  # every allowed one
     assert q.grad[0, 3] == 0  # not allowed: untouched
-    with pytest.raises(ValueError, match="teacher_temperature"):
-        distillation_loss(q, *args, teacher_temperature=-1.0)
+    with pytest.raises(ValueError, match="teacher_temperature must be a finite number >= 0"):
+        LossOptions(teacher_temperature=-1.0)
+
+
+def test_loss_options_refuse_bad_values_by_name() -> None:
+    assert LossOptions(weights=[1, 2, 3, 4]).weights == (1.0, 2.0, 3.0, 4.0)  # type: ignore[arg-type]
+    for kwargs, message in (({"margin": float("nan")}, "margin must be a finite number >= 0"),
+                            ({"teacher_radius": -1}, "teacher_radius must be a finite number >= 0, got -1"),
+                            ({"progress_radius": 1.5}, "progress_radius must be a whole number of cells"),
+                            ({"weights": (1.0, 1.0, 1.0)}, "weights must be 4 numbers"),
+                            ({"weights": (1.0, -1.0, 1.0, 1.0)}, "the ranking weight must be a finite number >= 0")):
+        with pytest.raises(ValueError, match=message):
+            LossOptions(**kwargs)  # type: ignore[arg-type]

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import json
 import pathlib
 import sys
@@ -33,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from sb3_pixeldqn.distill import LabelledStates, distill, evaluate
+from sb3_pixeldqn.distill import DEFAULT_WEIGHTS, LabelledStates, LossOptions, distill, evaluate
 from shelf_env.files import write_json_atomically
 from shelf_env.privileged import dataset
 
@@ -89,29 +90,21 @@ def select_shards(shards: list[dataset.Shard], spec: int | str | None) -> list[d
 
 
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
-        max_states: int | None = None, batch_states: int = 16, margin: float = 1.0,
+        max_states: int | None = None, batch_states: int = 16, loss: LossOptions = LossOptions(),
         learning_rate: float | None = None, seed: int = 0, max_shards: int | str | None = None,
-        augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0,
-        teacher_radius: int = 0, teacher_weight: float = 1.0, progress_radius: int = 0,
-        progress_weight: float = 1.0, teacher_temperature: float = 0.0) -> dict[str, Any]:
+        augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
     draw each batch's states through the model's own augmentation (its exact symmetries), as its training did.
     ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions).
     ``progress``: the progress term ranks a state's valid actions by the objects they sorted. ``anchor``:
-    the weight that keeps unlabelled allowed actions at the starting model's values (0: none).
-    ``teacher_radius``: the teacher term's square around the teacher's action, in cells (0: the pixel).
-    ``progress_radius``: the progress term's square around its lower action, in cells (0: the pixel).
-    ``teacher_temperature`` > 0: the teacher term as a cross-entropy over the allowed actions at that
-    temperature (0: the margin). ``teacher_weight``, ``progress_weight``: those terms' weights in training
-    (the validation loss keeps the default weights, so that recipes compare)."""
+    the weight that keeps unlabelled allowed actions at the starting model's values (0: none). ``loss``: the
+    loss's margin, weights, radii and temperature in training (`LossOptions`); the validation loss keeps the
+    default weights, so that recipes compare."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     if epochs < 1 or not 0 <= val_fraction < 1:
         raise ValueError(f"need epochs >= 1 and val_fraction in [0, 1), got {epochs} and {val_fraction}")
-    if min(teacher_radius, teacher_weight, progress_radius, progress_weight, teacher_temperature) < 0:
-        raise ValueError(f"--teacher-radius, --teacher-weight, --progress-radius, --progress-weight and "
-                         f"--teacher-temperature must be >= 0, got {teacher_radius}, {teacher_weight}, "
-                         f"{progress_radius}, {progress_weight} and {teacher_temperature}")
+    val_loss = dataclasses.replace(loss, weights=DEFAULT_WEIGHTS)
     if not pathlib.Path(init).is_file():
         raise ValueError(f"--init {init!r} does not exist")
     model = PixelDoubleDQN.load(init, device="cpu")
@@ -137,22 +130,14 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     start = time.monotonic()
     history: list[dict[str, Any]] = []
     if val is not None:  # the starting model, for comparison
-        history.append({"epoch": 0, "val": evaluate(model.policy, val, margin, teacher_radius=teacher_radius,
-                                                           progress_radius=progress_radius,
-                                                           teacher_temperature=teacher_temperature)})
+        history.append({"epoch": 0, "val": evaluate(model.policy, val, val_loss)})
         print(json.dumps(history[-1]), flush=True)
     for epoch in range(epochs):
-        row: dict[str, Any] = {"epoch": epoch + 1, "train": distill(model, train, 1, batch_states, margin,
+        row: dict[str, Any] = {"epoch": epoch + 1, "train": distill(model, train, 1, batch_states, loss,
                                                                      seed=seed + epoch, augment=transforms,
-                                                                     anchor=anchor, anchor_net=anchor_net,
-                                                                     teacher_radius=teacher_radius,
-                                                                     weights=(1.0, 1.0, teacher_weight,
-                                                                              progress_weight),
-                                                                     progress_radius=progress_radius,
-                                                                     teacher_temperature=teacher_temperature)[0]}
+                                                                     anchor=anchor, anchor_net=anchor_net)[0]}
         if val is not None:
-            row["val"] = evaluate(model.policy, val, margin, teacher_radius=teacher_radius,
-                                  progress_radius=progress_radius, teacher_temperature=teacher_temperature)
+            row["val"] = evaluate(model.policy, val, val_loss)
         history.append(row)
         print(json.dumps(row), flush=True)
     model.save(out)
@@ -160,9 +145,9 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "train_states": len(train.obs),
               "train_labels": len(train.label_action), "val_states": 0 if val is None else len(val.obs),
               "epochs": epochs, "augment": [repr(t) for t in transforms], "masks": masks, "progress": progress,
-              "anchor": anchor, "teacher_radius": teacher_radius, "teacher_weight": teacher_weight,
-              "progress_radius": progress_radius, "progress_weight": progress_weight,
-              "teacher_temperature": teacher_temperature,
+              "anchor": anchor, "margin": loss.margin, "teacher_radius": loss.teacher_radius,
+              "teacher_weight": loss.weights[2], "progress_radius": loss.progress_radius,
+              "progress_weight": loss.weights[3], "teacher_temperature": loss.teacher_temperature,
               "seconds": round(time.monotonic() - start, 1), "history": history}
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
@@ -200,12 +185,11 @@ def main(argv: list[str] | None = None) -> int:
                    "for the allowed cells of its map within this many cells (0: the pixel)")
     args = p.parse_args(argv)
     try:
+        loss = LossOptions(args.margin, (1.0, 1.0, args.teacher_weight, args.progress_weight), args.teacher_radius,
+                           args.progress_radius, args.teacher_temperature)
         run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
-            args.margin, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
-            masks=args.teacher_over == "masked", progress=not args.no_progress,
-            anchor=args.anchor, teacher_radius=args.teacher_radius, teacher_weight=args.teacher_weight,
-            progress_radius=args.progress_radius, progress_weight=args.progress_weight,
-            teacher_temperature=args.teacher_temperature)
+            loss, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
+            masks=args.teacher_over == "masked", progress=not args.no_progress, anchor=args.anchor)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2
