@@ -5,7 +5,10 @@
 
 For every (N, seed, run) that the planner's folder holds, the same episode's record of every policy
 in the ``--against`` folders (their cells: the same scene seeds), as a table: sorted or how it
-ended, actions, and the planner's env actions per decision. Writes the table to ``--out``.
+ended, actions, and the planner's env actions per decision. Above it, per N, each policy's scenes
+sorted and dropped out of those the planner played (`summary`; "-" for a policy that lacks one of
+them: its count would be over other scenes), with the planner's env actions per decision. Writes the
+tables to ``--out``.
 """
 
 from __future__ import annotations
@@ -14,8 +17,36 @@ import argparse
 import pathlib
 import sys
 
-from shelf_env.evaluation.protocol import load_cells
+from shelf_env.evaluation.protocol import EpisodeRecord, load_cells
 from shelf_env.files import write_text_atomically
+
+
+def planner_actions(records: list[EpisodeRecord]) -> tuple[int, int]:
+    """(env actions, decisions) the planner's ``records`` spent (its ``policy_stats``)."""
+    stats = [r.policy_stats for r in records if r.policy_stats]
+    decisions = sum(s.get("decisions", 0) + s.get("uncover_decisions", 0) for s in stats)
+    return sum(s.get("actions", 0) for s in stats), decisions
+
+
+def summary(mine: list[EpisodeRecord], others: list[EpisodeRecord], policies: list[str]) -> list[str]:
+    """Markdown rows: per N, each policy's "sorted k / n (fell f)" over the planner's scenes at that N, and
+    the planner's env actions per decision there. A policy missing one of those scenes shows "-"."""
+    by = {(r.policy, r.num_objects, r.seed, r.run): r for r in [*others, *mine]}
+    rows = ["| N | scenes | " + " | ".join(policies) + " | planner env actions per decision |",
+            "|---|---|" + "---|" * (len(policies) + 1)]
+    for n in sorted({r.num_objects for r in mine}):
+        scenes = sorted({(r.seed, r.run) for r in mine if r.num_objects == n})
+        cells = []
+        for policy in policies:
+            records = [by.get((policy, n, seed, run)) for seed, run in scenes]
+            if any(r is None for r in records):
+                cells.append("-")
+                continue
+            done = [r for r in records if r is not None]
+            cells.append(f"{sum(r.success for r in done)} / {len(done)} (fell {sum(r.fell for r in done)})")
+        actions, decisions = planner_actions([r for r in mine if r.num_objects == n])
+        rows.append(f"| {n} | {len(scenes)} | " + " | ".join(cells) + f" | {actions / max(decisions, 1):.1f} |")
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -23,6 +54,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("folder", type=pathlib.Path, help="the planner's evaluation folder")
     p.add_argument("--against", type=pathlib.Path, nargs="+", required=True, help="evaluation folders to compare")
     p.add_argument("--out", type=pathlib.Path, required=True, help="the markdown table to write")
+    p.add_argument("--policies", nargs="+", default=None, help="the compared policies' columns, in this order "
+                   "(default: every policy of the --against folders that played one of the planner's scenes)")
     args = p.parse_args(argv)
     try:
         mine = load_cells(args.folder)
@@ -31,7 +64,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"planner_probe: error: {err}", file=sys.stderr)
         return 2
     keys = sorted({(r.num_objects, r.seed, r.run) for r in mine})
-    policies = sorted({r.policy for r in mine} | {r.policy for r in others if (r.num_objects, r.seed, r.run) in keys})
+    played = {r.policy for r in others if (r.num_objects, r.seed, r.run) in keys}
+    if args.policies is not None and not set(args.policies) <= played:
+        print(f"planner_probe: error: no record of {sorted(set(args.policies) - played)} on the planner's scenes "
+              f"(policies there: {sorted(played)})", file=sys.stderr)
+        return 2
+    policies = sorted({r.policy for r in mine}) + (args.policies if args.policies is not None else sorted(played))
     by = {(r.policy, r.num_objects, r.seed, r.run): r for r in [*others, *mine]}
     rows = ["| N | seed | run | " + " | ".join(policies) + " |", "|---|---|---|" + "---|" * len(policies)]
     for n, seed, run in keys:
@@ -40,11 +78,11 @@ def main(argv: list[str] | None = None) -> int:
             r = by.get((policy, n, seed, run))
             cells.append("-" if r is None else f"{'sorted' if r.success else r.failure or 'failed'} in {r.actions}")
         rows.append(f"| {n} | {seed} | {run} | " + " | ".join(cells) + " |")
-    stats = [r.policy_stats for r in mine if r.policy_stats]
-    decisions = sum(s.get("decisions", 0) + s.get("uncover_decisions", 0) for s in stats)
-    actions = sum(s.get("actions", 0) for s in stats)
+    actions, decisions = planner_actions(mine)
     command = " ".join(["python research/planner_probe.py", *(sys.argv[1:] if argv is None else argv)])
-    text = (f"Sorted (or how the episode ended) and actions, the same scenes for every policy (`{command}`):\n\n"
+    text = (f"Scenes sorted (and dropped), the same scenes for every policy (`{command}`):\n\n"
+            + "\n".join(summary(mine, others, policies))
+            + "\n\nPer scene, sorted (or how the episode ended) and actions:\n\n"
             + "\n".join(rows) + f"\n\nThe planner spent {actions / max(decisions, 1):.1f} env actions per decision "
             f"({decisions} decisions).\n")
     write_text_atomically(args.out, text)
