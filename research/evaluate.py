@@ -1,10 +1,11 @@
-"""``shelf-evaluate`` with the experiments' policy wrappers registered (``<zip>+fall-filter``).
+"""``shelf-evaluate`` with the experiments' policy wrappers registered (``<zip>+fall-filter``, ``<zip>+veto``).
 
     python -m research.evaluate --policies results/fall_filter/model/p_s.zip+fall-filter ... (shelf-evaluate's options)
 """
 
 from __future__ import annotations
 
+import research.distilled_veto  # noqa: F401  (registers +veto)
 import research.fall_risk  # noqa: F401  (registers +fall-filter with shelf_env.policies)
 from shelf_env.cli.evaluate import main
 

@@ -1,0 +1,170 @@
+"""A distilled model as a veto on the shipped P+S's choice (an experiment, camera-only at test time).
+
+    python -m research.distilled_veto make --base examples/pretrained/p_s.zip \\
+        --veto runs/distill_scaling/p_s_d440_aug_mpa.zip --delta 1 --out results/distilled_veto/model/p_s_v440_d1.zip
+    python -m research.distilled_veto falls results/distilled_veto/model/p_s_v440_d1.zip+veto --ns 8 --runs 10 \\
+        --seed 2000 --out results/distilled_veto/falls.json      (shelf_env.evaluation.falls with +veto known)
+    python -m research.evaluate --policies results/distilled_veto/model/p_s_v440_d1.zip+veto ...  (shelf-evaluate)
+
+The distilled models (docs/experiments/distill-scaling.md) learned to rank the actions that drop an object
+below safe ones (1–2.4 % invalid greedy actions per action on held-out scenes at N = 8 against the shipped
+model's 16 %) but not to sort: their valid actions sort an object 13 % of the time, the shipped model's
+39 %. This wrapper asks whether the two halves combine: the shipped model chooses, among the actions the
+env allows, only from those the distilled model values within ``delta`` of its own best,
+
+    keep = allowed & (Q_D(s, a) >= max_{allowed} Q_D(s, ·) − delta),   a = argmax_{keep} Q_P(s, ·),
+
+so ``delta`` = 0 is the distilled model's greedy choice (up to ties) and a large ``delta`` the shipped
+model's. The distillation's ranking term sets the scale: it puts a labelled fall at least a margin (1)
+below a safe action of the same state.
+
+``make`` writes a copy of the base checkpoint and, beside it, ``<stem>.veto.json`` (the distilled zip's
+path and digest, ``delta``): the copy's file stem is the policy's label, so each (veto model, delta) has its
+own cells. ``<zip>+veto`` plays the copy under `DistilledVeto`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import pathlib
+import shutil
+import sys
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from shelf_env import policies
+from shelf_env.evaluation.protocol import policy_digest
+from shelf_env.files import write_json_atomically
+
+#: Appended to a checkpoint's path: play it under `DistilledVeto` with the settings of `veto_path`.
+VETO = "+veto"
+
+
+class DistilledVeto:
+    """Wrap ``policy`` (SB3's ``predict`` with ``action_masks``): before it chooses, the allowed actions are
+    narrowed to those ``veto`` (a `PixelDoubleDQN` of the same layout) values within ``delta`` of its best
+    allowed action (module docstring). ``stats``: ``decisions``, and ``vetoed``: the decisions where the
+    policy's own choice was outside the kept set (so the veto changed the action)."""
+
+    def __init__(self, policy: Any, veto: Any, delta: float) -> None:
+        if not (math.isfinite(delta) and delta >= 0):
+            raise ValueError(f"delta must be a finite number >= 0, got {delta}")
+        self.policy, self.veto, self.delta = policy, veto, float(delta)
+        self.observation_space, self.action_space = policy.observation_space, policy.action_space
+        if tuple(veto.observation_space.shape) != tuple(self.observation_space.shape) or \
+                int(veto.action_space.n) != int(self.action_space.n):
+            raise ValueError(f"the veto model takes observations {tuple(veto.observation_space.shape)} and "
+                             f"{int(veto.action_space.n)} actions; the policy {tuple(self.observation_space.shape)} "
+                             f"and {int(self.action_space.n)}")
+        self.stats = {"decisions": 0, "vetoed": 0}
+
+    def kept(self, observation: np.ndarray, allowed: np.ndarray) -> np.ndarray:
+        """The allowed actions (flat bool) the veto model values within ``delta`` of its best allowed one."""
+        q = self.veto.policy.q_map_values(np.asarray(observation)).reshape(-1)
+        if not allowed.any():
+            return allowed
+        return allowed & (q >= q[allowed].max() - self.delta)
+
+    def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True, action_masks: np.ndarray | None = None) -> tuple[np.ndarray, Any]:
+        obs = np.asarray(observation)
+        if obs.shape != self.observation_space.shape:
+            raise ValueError(f"DistilledVeto acts on one observation of shape {self.observation_space.shape}, "
+                             f"got {obs.shape}")
+        allowed = (np.ones(int(self.action_space.n), bool) if action_masks is None
+                   else np.asarray(action_masks, bool).reshape(-1))
+        keep = self.kept(obs, allowed)
+        own, _ = self.policy.predict(obs, state=state, deterministic=deterministic, action_masks=allowed)
+        self.stats["decisions"] += 1
+        if keep[int(own)]:
+            return own, state
+        self.stats["vetoed"] += 1
+        return self.policy.predict(obs, state=state, deterministic=deterministic, action_masks=keep)
+
+
+def veto_path(checkpoint: str | os.PathLike) -> pathlib.Path:
+    """The settings a ``<checkpoint>+veto`` policy reads: ``<stem>.veto.json`` beside the checkpoint."""
+    path = pathlib.Path(checkpoint)
+    return path.with_name(path.stem + ".veto.json")
+
+
+def read_settings(base: str) -> tuple[pathlib.Path, float]:
+    """(the veto model's path, delta) of ``base``'s settings; `ValueError` naming what is wrong."""
+    path = veto_path(base)
+    if not path.is_file():
+        raise ValueError(f"policy {base}{VETO}: no settings at {path} (python -m research.distilled_veto "
+                         f"make writes them)")
+    settings = json.loads(path.read_text())
+    model = pathlib.Path(settings["veto"])
+    if not model.is_file():
+        raise ValueError(f"{path}: the veto model {model} does not exist")
+    if policy_digest(str(model)) != settings["veto_sha256"]:
+        raise ValueError(f"{path}: the veto model {model} is not the one the settings were made with (sha256)")
+    return model, float(settings["delta"])
+
+
+def _check(base: str) -> None:
+    if base in policies.POLICIES:
+        raise ValueError(f"{VETO} narrows a checkpoint's choice with a distilled model; {base!r} is not a checkpoint")
+    read_settings(base)
+
+
+def _wrap(agent: Any, env: gym.Env, base: str) -> DistilledVeto:
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    model, delta = read_settings(base)
+    return DistilledVeto(agent, PixelDoubleDQN.load(model, device="cpu"), delta)
+
+
+policies.register_wrapper(VETO, _wrap, check=_check, files=lambda base: [veto_path(base)])
+
+
+def make(base: pathlib.Path, veto: pathlib.Path, delta: float, out: pathlib.Path) -> pathlib.Path:
+    """Copy ``base`` to ``out`` and write ``out``'s settings (``veto``, its digest, ``delta``) beside it."""
+    for name, path in (("--base", base), ("--veto", veto)):
+        if not path.is_file():
+            raise ValueError(f"{name} {path} does not exist")
+    if not (math.isfinite(delta) and delta >= 0):
+        raise ValueError(f"--delta must be a finite number >= 0, got {delta}")
+    if out.suffix != ".zip":
+        raise ValueError(f"--out must be a .zip (the policy's label is its stem), got {out}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp")
+    shutil.copyfile(base, tmp)
+    os.replace(tmp, out)
+    write_json_atomically(veto_path(out), {"base": str(base), "veto": str(veto),
+                                           "veto_sha256": policy_digest(str(veto)), "delta": delta})
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m research.distilled_veto", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    m = sub.add_parser("make", help="a copy of the base checkpoint with its veto settings beside it")
+    m.add_argument("--base", type=pathlib.Path, default=pathlib.Path("examples/pretrained/p_s.zip"))
+    m.add_argument("--veto", type=pathlib.Path, required=True, help="the distilled model (an SB3 zip)")
+    m.add_argument("--delta", type=float, required=True, help="kept: within this of the veto model's best")
+    m.add_argument("--out", type=pathlib.Path, required=True, help="the copy (.zip); its stem is the label")
+    sub.add_parser("falls", help="python -m shelf_env.evaluation.falls with +veto registered (its arguments follow)",
+                   add_help=False)
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["falls"]:
+        from shelf_env.evaluation import falls
+
+        return falls.main(argv[1:])
+    args = p.parse_args(argv)
+    try:
+        print(make(args.base, args.veto, args.delta, args.out))
+    except ValueError as err:
+        print(f"distilled_veto: error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
