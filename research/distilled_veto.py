@@ -20,7 +20,10 @@ below a safe action of the same state.
 
 ``make`` writes a copy of the base checkpoint and, beside it, ``<stem>.veto.json`` (the distilled zip's
 path and digest, ``delta``): the copy's file stem is the policy's label, so each (veto model, delta) has its
-own cells. ``<zip>+veto`` plays the copy under `DistilledVeto`.
+own cells. ``<zip>+veto`` plays the copy under `DistilledVeto`. ``margins`` says, on the labelled states
+of the veto model's own validation scenes, what share of the labelled falls, valid actions and sorting
+actions lie within each ``delta`` of its best allowed action (`veto_margins`): what a veto at that
+``delta`` would let through.
 """
 
 from __future__ import annotations
@@ -142,6 +145,49 @@ def make(base: pathlib.Path, veto: pathlib.Path, delta: float, out: pathlib.Path
     return out
 
 
+def gaps(q: np.ndarray, masks: np.ndarray, label_state: np.ndarray, label_action: np.ndarray) -> np.ndarray:
+    """How far each labelled action's value lies below its state's best allowed action: ``q`` (S, n_actions),
+    ``masks`` (S, n_actions) bool, labels (K,) -> (K,), 0 for the best one; a veto at ``delta`` keeps the
+    labels with a gap <= delta."""
+    best = np.where(masks, q, -np.inf).max(axis=1)
+    return best[label_state] - q[label_state, label_action]
+
+
+def veto_margins(model_path: pathlib.Path, data: pathlib.Path, deltas: list[float],
+                 val_fraction: float = 0.2) -> dict[str, Any]:
+    """What a veto at each ``delta`` keeps on the validation scenes of the veto model's own distillation
+    (its ``.distill.json``'s shards, split as `shelf_env.training.distill` split them): the share of the
+    labelled actions that dropped an object, of the valid ones and of those that sorted an object whose
+    value lies within ``delta`` of the model's best allowed action of their state."""
+    from sb3_pixeldqn import PixelDoubleDQN
+    from shelf_env.privileged import dataset
+    from shelf_env.training.distill import split_by_scene
+
+    report_path = model_path.with_suffix(".distill.json")
+    if not report_path.is_file():
+        raise ValueError(f"{report_path} does not exist: the veto model's distillation report names its shards")
+    report = json.loads(report_path.read_text())
+    shards = [dataset.load_shard(data / name) for name in report["shards"]]
+    _, val = split_by_scene(shards, val_fraction)
+    if len(val) != report["val_states"]:
+        raise ValueError(f"the split at val_fraction {val_fraction} gives {len(val)} validation states; "
+                         f"{report_path} had {report['val_states']}")
+    states = dataset.labelled_states(shards).subset(np.array(val))
+    model = PixelDoubleDQN.load(model_path, device="cpu")
+    n = int(model.action_space.n)
+    q = np.concatenate([model.policy.q_map_values(states.obs[i:i + 32]).reshape(-1, n)
+                        for i in range(0, len(states.obs), 32)])
+    masks = states.unpacked_masks(n)
+    assert masks is not None and states.label_progress is not None
+    gap = gaps(q, masks, states.label_state, states.label_action)
+    groups = {"fell": states.label_invalid, "valid": ~states.label_invalid,
+              "sorted": ~states.label_invalid & (states.label_progress > 0)}
+    return {"model": str(model_path), "val_states": len(val),
+            "labels": {k: int(v.sum()) for k, v in groups.items()},
+            "kept": {f"{d:g}": {k: float(np.mean(gap[v] <= d)) if v.any() else None for k, v in groups.items()}
+                     for d in deltas}}
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m research.distilled_veto", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -150,6 +196,11 @@ def main(argv: list[str] | None = None) -> int:
     m.add_argument("--veto", type=pathlib.Path, required=True, help="the distilled model (an SB3 zip)")
     m.add_argument("--delta", type=float, required=True, help="kept: within this of the veto model's best")
     m.add_argument("--out", type=pathlib.Path, required=True, help="the copy (.zip); its stem is the label")
+    g = sub.add_parser("margins", help="what a veto at each delta keeps of the veto model's validation labels")
+    g.add_argument("models", type=pathlib.Path, nargs="+", help="distilled zips (their .distill.json beside them)")
+    g.add_argument("--data", type=pathlib.Path, default=pathlib.Path("data/teacher"))
+    g.add_argument("--deltas", type=float, nargs="+", default=[0.0, 0.25, 0.5, 1.0, 2.0])
+    g.add_argument("--out", type=pathlib.Path, default=None, help="also write the results here (JSON)")
     sub.add_parser("falls", help="python -m shelf_env.evaluation.falls with +veto registered (its arguments follow)",
                    add_help=False)
     argv = sys.argv[1:] if argv is None else argv
@@ -159,6 +210,12 @@ def main(argv: list[str] | None = None) -> int:
         return falls.main(argv[1:])
     args = p.parse_args(argv)
     try:
+        if args.command == "margins":
+            results = [veto_margins(m, args.data, args.deltas) for m in args.models]
+            print(json.dumps(results, indent=1))
+            if args.out is not None:
+                write_json_atomically(args.out, results)
+            return 0
         print(make(args.base, args.veto, args.delta, args.out))
     except ValueError as err:
         print(f"distilled_veto: error: {err}", file=sys.stderr)

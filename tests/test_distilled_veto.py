@@ -87,3 +87,13 @@ def test_make_writes_the_settings_and_the_registry_checks_them(tmp_path: pathlib
         assert dv.main(argv) == 2
         assert message in capsys.readouterr().err
     assert not (tmp_path / "x.zip").exists() and not (tmp_path / "x.pt").exists()
+
+
+def test_gaps_are_measured_from_the_best_allowed_action(tmp_path: pathlib.Path, capsys) -> None:
+    q = np.array([[3.0, 1.0, 9.0, 2.5], [0.0, -1.0, -2.0, 5.0]])
+    masks = np.array([[True, True, False, True], [True, True, True, False]])  # 9.0 and 5.0 not allowed
+    gap = dv.gaps(q, masks, np.array([0, 0, 0, 1, 1]), np.array([0, 1, 3, 1, 2]))
+    assert gap.tolist() == [0.0, 2.0, 0.5, 1.0, 2.0]
+    (tmp_path / "d.zip").write_bytes(b"")
+    assert dv.main(["margins", str(tmp_path / "d.zip"), "--data", str(tmp_path)]) == 2
+    assert "d.distill.json does not exist" in capsys.readouterr().err
