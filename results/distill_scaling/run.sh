@@ -51,6 +51,8 @@ SHARDS=s00:55,s01:7 distil p_s_dagger7_aug_mpa all --anchor 1.0
 SHARDS=s00:55,s01:7 distil p_s_dagger7_aug_mpa_pr2_p5 all --anchor 1.0 --progress-radius 2 --progress-weight 5
 # ... with the teacher term as a cross-entropy of the allowed actions' softmax (temperature 1) on its 5 x 5 square
 SHARDS=s00:55,s01:7 distil p_s_dagger7_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
+# the cross-entropy recipe at the third session's dataset (55 shards of series 0, 19 of series 1): the scaling point
+SHARDS=s00:55,s01:19 distil p_s_dagger19_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
 
 # B + 45 min of PixelDoubleDQN with the dataset as demonstrations (the data/teacher of the time: 37 shards)
 if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then

@@ -41,11 +41,19 @@ M=runs/distill_scaling
 [ -f $M/p_s_dagger7_aug_mpa_r2_ce1.zip ] || bash results/distill_scaling/run.sh
 .venv/bin/shelf-evaluate --policies $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
   --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test "$@"
+# ... the same recipe at the third session's dataset (55 + 19 shards): the cross-entropy term's scaling point
+[ -f $M/p_s_dagger19_aug_mpa_r2_ce1.zip ] || bash results/distill_scaling/run.sh
+.venv/bin/shelf-evaluate --policies $M/p_s_dagger19_aug_mpa_r2_ce1.zip \
+  --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test "$@"
+# the cross-entropy models' and the DAgger model's greedy invalid actions per action on the first 10 scenes at N = 8
+.venv/bin/python -m shelf_env.evaluation.falls $M/p_s_dagger19_aug_mpa_r2_ce1.zip $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
+  $M/p_s_dagger7_aug_mpa.zip --ns 8 --runs 10 --seed 0 --out results/distill_test/falls.json
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
   h-d+loop-breaker h-a+loop-breaker $M/p_s_d52sh_aug_mpa.zip $M/p_s_dagger7_aug_mpa.zip $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
+  $M/p_s_dagger19_aug_mpa_r2_ce1.zip \
   --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
-for m in p_s_d52sh_aug_mpa p_s_dagger7_aug_mpa p_s_dagger7_aug_mpa_r2_ce1; do
+for m in p_s_d52sh_aug_mpa p_s_dagger7_aug_mpa p_s_dagger7_aug_mpa_r2_ce1 p_s_dagger19_aug_mpa_r2_ce1; do
   .venv/bin/python -m shelf_env.evaluation.report results/distill_test --learned $m --pick-only s --heuristics h-d h-a \
     --out results/distill_test/report_$m.md
 done
