@@ -33,7 +33,6 @@ import json
 import math
 import os
 import pathlib
-import shutil
 import sys
 from typing import Any
 
@@ -42,7 +41,7 @@ import numpy as np
 
 from shelf_env import policies
 from shelf_env.evaluation.protocol import policy_digest
-from shelf_env.files import write_json_atomically
+from shelf_env.files import copy_atomically, write_json_atomically
 
 #: Appended to a checkpoint's path: play it under `DistilledVeto` with the settings of `veto_path`.
 VETO = "+veto"
@@ -137,9 +136,7 @@ def make(base: pathlib.Path, veto: pathlib.Path, delta: float, out: pathlib.Path
     if out.suffix != ".zip":
         raise ValueError(f"--out must be a .zip (the policy's label is its stem), got {out}")
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    shutil.copyfile(base, tmp)
-    os.replace(tmp, out)
+    copy_atomically(base, out)
     write_json_atomically(veto_path(out), {"base": str(base), "veto": str(veto),
                                            "veto_sha256": policy_digest(str(veto)), "delta": delta})
     return out

@@ -28,10 +28,11 @@ def planner_actions(records: list[EpisodeRecord]) -> tuple[int, int]:
     return sum(s.get("actions", 0) for s in stats), decisions
 
 
-def summary(mine: list[EpisodeRecord], others: list[EpisodeRecord], policies: list[str]) -> list[str]:
+def summary(mine: list[EpisodeRecord], by: dict[tuple[str, int, int, int], EpisodeRecord],
+            policies: list[str]) -> list[str]:
     """Markdown rows: per N, each policy's "sorted k / n (fell f)" over the planner's scenes at that N, and
-    the planner's env actions per decision there. A policy missing one of those scenes shows "-"."""
-    by = {(r.policy, r.num_objects, r.seed, r.run): r for r in [*others, *mine]}
+    the planner's env actions per decision there; ``by``: every episode by (policy, N, seed, run). A policy
+    missing one of those scenes shows "-"."""
     rows = ["| N | scenes | " + " | ".join(policies) + " | planner env actions per decision |",
             "|---|---|" + "---|" * (len(policies) + 1)]
     for n in sorted({r.num_objects for r in mine}):
@@ -81,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     actions, decisions = planner_actions(mine)
     command = " ".join(["python research/planner_probe.py", *(sys.argv[1:] if argv is None else argv)])
     text = (f"Scenes sorted (and dropped), the same scenes for every policy (`{command}`):\n\n"
-            + "\n".join(summary(mine, others, policies))
+            + "\n".join(summary(mine, by, policies))
             + "\n\nPer scene, sorted (or how the episode ended) and actions:\n\n"
             + "\n".join(rows) + f"\n\nThe planner spent {actions / max(decisions, 1):.1f} env actions per decision "
             f"({decisions} decisions).\n")
