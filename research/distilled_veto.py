@@ -95,19 +95,32 @@ def veto_path(checkpoint: str | os.PathLike) -> pathlib.Path:
     return path.with_name(path.stem + ".veto.json")
 
 
+REMAKE = "python -m research.distilled_veto make rewrites it"
+
+
 def read_settings(base: str) -> tuple[pathlib.Path, float]:
     """(the veto model's path, delta) of ``base``'s settings; `ValueError` naming what is wrong."""
     path = veto_path(base)
     if not path.is_file():
         raise ValueError(f"policy {base}{VETO}: no settings at {path} (python -m research.distilled_veto "
                          f"make writes them)")
-    settings = json.loads(path.read_text())
-    model = pathlib.Path(settings["veto"])
+    try:
+        settings = json.loads(path.read_text())
+        model = pathlib.Path(settings["veto"])
+        digest, delta = str(settings["veto_sha256"]), float(settings["delta"])
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path}: not JSON ({err}); {REMAKE}") from err
+    except KeyError as err:
+        raise ValueError(f"{path}: no {err.args[0]!r} setting; {REMAKE}") from err
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{path}: a setting of the wrong type ({err})") from err
+    if not math.isfinite(delta) or delta < 0:
+        raise ValueError(f"{path}: delta must be a finite number >= 0, got {delta}")
     if not model.is_file():
         raise ValueError(f"{path}: the veto model {model} does not exist")
-    if policy_digest(str(model)) != settings["veto_sha256"]:
+    if policy_digest(str(model)) != digest:
         raise ValueError(f"{path}: the veto model {model} is not the one the settings were made with (sha256)")
-    return model, float(settings["delta"])
+    return model, delta
 
 
 def _check(base: str) -> None:

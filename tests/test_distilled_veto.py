@@ -97,3 +97,18 @@ def test_gaps_are_measured_from_the_best_allowed_action(tmp_path: pathlib.Path, 
     (tmp_path / "d.zip").write_bytes(b"")
     assert dv.main(["margins", str(tmp_path / "d.zip"), "--data", str(tmp_path)]) == 2
     assert "d.distill.json does not exist" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text, message", [
+    ("{not json", "not JSON"),
+    ('{"veto": "m.zip", "delta": 1}', "no 'veto_sha256' setting"),
+    ('{"veto": "m.zip", "veto_sha256": "x", "delta": "wide"}', "wrong type"),
+    ('{"veto": "m.zip", "veto_sha256": "x", "delta": -1}', "delta must be a finite number >= 0"),
+])
+def test_a_broken_settings_file_is_refused_by_name(tmp_path: pathlib.Path, text: str, message: str) -> None:
+    base = tmp_path / "base.zip"
+    base.write_bytes(b"base")
+    dv.veto_path(base).write_text(text)
+    with pytest.raises(ValueError, match=message) as err:
+        policies.check_policy(f"{base}{dv.VETO}")
+    assert str(dv.veto_path(base)) in str(err.value)
