@@ -14,11 +14,13 @@ are cached under ``<out folder>/cells/``, so an interrupted check resumes.
 from __future__ import annotations
 
 import argparse
+import os
 import pathlib
 from concurrent.futures import ProcessPoolExecutor
 
 from shelf_env.evaluation import protocol as ev
 from shelf_env.files import write_json_atomically
+from shelf_env.processes import exit_with_parent
 
 N = 3
 
@@ -40,7 +42,7 @@ def main(argv: list[str] | None = None) -> dict:
     ev.check_policy(args.checkpoint)
     jobs = {(policy, oset): (policy, oset, args.scenes, args.out.parent)
             for policy in (args.checkpoint, "h-d") for oset in ("train", "ycb")}
-    with ProcessPoolExecutor(args.workers) as pool:
+    with ProcessPoolExecutor(args.workers, initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
         futures = {key: pool.submit(_cell, *job) for key, job in jobs.items()}
         results = {key: ev.episode_summary(f.result()) for key, f in futures.items()}
     learned = {oset: results[(args.checkpoint, oset)] for oset in ("train", "ycb")}

@@ -48,6 +48,7 @@ from tqdm import tqdm
 from shelf_env import policies
 from shelf_env.evaluation import protocol as ev
 from shelf_env.files import copy_atomically, write_json_atomically
+from shelf_env.processes import worker_initializer
 
 #: A cell: (policy, N, seed, object set).
 Job = tuple[str, int, int, str]
@@ -144,8 +145,9 @@ def run_local(todo: list[Job], paths: dict[Job, pathlib.Path], runs: int, worker
     """Every cell of ``todo`` in a worker process; each worker writes its cell when done."""
     ctx = mp.get_context("spawn")
     # a spawned worker imports the modules that registered the policies' wrappers (an experiment's)
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=policies.import_modules,
-                             initargs=(policies.registering_modules(),)) as pool:
+    # ... and ends when this process does (killed, its pool's shutdown never runs)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=worker_initializer,
+                             initargs=(os.getpid(), policies.import_modules, policies.registering_modules())) as pool:
         futures = [pool.submit(_run_cell, p, n, s, runs, o, str(paths[(p, n, s, o)]), os.getpid(), conditions)
                    for p, n, s, o in todo]
         for future in tqdm(as_completed(futures), total=len(futures), desc="cells", unit="cell"):

@@ -68,6 +68,7 @@ from shelf_env.evaluation.protocol import policy_digest
 from shelf_env.files import write_atomically
 from shelf_env.policies import POLICIES, masked_greedy
 from shelf_env.privileged.lookahead import LookaheadHeuristic, Outcome, probe_step
+from shelf_env.processes import exit_with_parent
 
 #: Version of the shard layout below; a shard of another is refused.
 FORMAT = 1
@@ -564,7 +565,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.workers == 1:
             written = [_collect_worker(jobs[0])]
         else:
-            with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
+            with multiprocessing.get_context("spawn").Pool(args.workers, initializer=exit_with_parent,
+                                                           initargs=(os.getpid(),)) as pool:
                 written = pool.map(_collect_worker, jobs)
         print(f"wrote {sum(written)} shards into {args.out}")
     except ValueError as err:
