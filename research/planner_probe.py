@@ -7,8 +7,10 @@ For every (N, seed, run) that the planner's folder holds, the same episode's rec
 in the ``--against`` folders (their cells: the same scene seeds), as a table: sorted or how it
 ended, actions, and the planner's env actions per decision. Above it, per N, each policy's scenes
 sorted and dropped out of those the planner played (`summary`; "-" for a policy that lacks one of
-them: its count would be over other scenes), with the planner's env actions per decision. Writes the
-tables to ``--out``.
+them: its count would be over other scenes), with the planner's env actions per decision and its margin
+over the best of the ``--heuristics`` on those scenes (SR points: the planner's SR minus the better
+heuristic's, per N), and that margin averaged over the N where every heuristic played every scene.
+Writes the tables to ``--out``.
 """
 
 from __future__ import annotations
@@ -28,13 +30,26 @@ def planner_actions(records: list[EpisodeRecord]) -> tuple[int, int]:
     return sum(s.get("actions", 0) for s in stats), decisions
 
 
+def sr(policy: str, n: int, scenes: list[tuple[int, int]],
+       by: dict[tuple[str, int, int, int], EpisodeRecord]) -> float | None:
+    """``policy``'s SR (%) over ``scenes`` at N = ``n``; None where it lacks one of them."""
+    records = [by.get((policy, n, seed, run)) for seed, run in scenes]
+    if not records or any(r is None for r in records):
+        return None
+    return 100.0 * sum(bool(r is not None and r.success) for r in records) / len(records)
+
+
 def summary(mine: list[EpisodeRecord], by: dict[tuple[str, int, int, int], EpisodeRecord],
-            policies: list[str]) -> list[str]:
-    """Markdown rows: per N, each policy's "sorted k / n (fell f)" over the planner's scenes at that N, and
-    the planner's env actions per decision there; ``by``: every episode by (policy, N, seed, run). A policy
-    missing one of those scenes shows "-"."""
-    rows = ["| N | scenes | " + " | ".join(policies) + " | planner env actions per decision |",
-            "|---|---|" + "---|" * (len(policies) + 1)]
+            policies: list[str], heuristics: list[str] | None = None) -> list[str]:
+    """Markdown rows: per N, each policy's "sorted k / n (fell f)" over the planner's scenes at that N, the
+    planner's env actions per decision there and, with ``heuristics``, the planner's margin over the better
+    of them (SR points; "-" where one lacks a scene), then a line with that margin averaged over the N that
+    have one; ``by``: every episode by (policy, N, seed, run). A policy missing one of those scenes shows "-"."""
+    planner = sorted({r.policy for r in mine})[0]
+    margin_head = f" margin over the best of {', '.join(heuristics)} (points) |" if heuristics else ""
+    rows = ["| N | scenes | " + " | ".join(policies) + " | planner env actions per decision |" + margin_head,
+            "|---|---|" + "---|" * (len(policies) + 1 + bool(heuristics))]
+    margins: dict[int, float] = {}
     for n in sorted({r.num_objects for r in mine}):
         scenes = sorted({(r.seed, r.run) for r in mine if r.num_objects == n})
         cells = []
@@ -46,7 +61,19 @@ def summary(mine: list[EpisodeRecord], by: dict[tuple[str, int, int, int], Episo
             done = [r for r in records if r is not None]
             cells.append(f"{sum(r.success for r in done)} / {len(done)} (fell {sum(r.fell for r in done)})")
         actions, decisions = planner_actions([r for r in mine if r.num_objects == n])
-        rows.append(f"| {n} | {len(scenes)} | " + " | ".join(cells) + f" | {actions / max(decisions, 1):.1f} |")
+        margin = ""
+        if heuristics:
+            theirs = [sr(h, n, scenes, by) for h in heuristics]
+            mine_sr = sr(planner, n, scenes, by)
+            if mine_sr is not None and all(t is not None for t in theirs):
+                margins[n] = mine_sr - max(t for t in theirs if t is not None)
+            margin = f" {margins[n]:+.1f} |" if n in margins else " - |"
+        rows.append(f"| {n} | {len(scenes)} | " + " | ".join(cells) + f" | {actions / max(decisions, 1):.1f} |"
+                    + margin)
+    if heuristics:
+        average = f"{sum(margins.values()) / len(margins):+.1f} points" if margins else "none"
+        rows += ["", f"{planner}'s margin over the best of {', '.join(heuristics)} averaged over the "
+                 f"{len(margins)} N measured ({', '.join(map(str, margins))}): {average}."]
     return rows
 
 
@@ -57,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=pathlib.Path, required=True, help="the markdown table to write")
     p.add_argument("--policies", nargs="+", default=None, help="the compared policies' columns, in this order "
                    "(default: every policy of the --against folders that played one of the planner's scenes)")
+    p.add_argument("--heuristics", nargs="*", default=["h-d", "h-a"],
+                   help="the planner's margin is over the best of these per N (default: h-d h-a; none: no margin)")
     args = p.parse_args(argv)
     try:
         mine = load_cells(args.folder)
@@ -82,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     actions, decisions = planner_actions(mine)
     command = " ".join(["python research/planner_probe.py", *(sys.argv[1:] if argv is None else argv)])
     text = (f"Scenes sorted (and dropped), the same scenes for every policy (`{command}`):\n\n"
-            + "\n".join(summary(mine, by, policies))
+            + "\n".join(summary(mine, by, policies, args.heuristics))
             + "\n\nPer scene, sorted (or how the episode ended) and actions:\n\n"
             + "\n".join(rows) + f"\n\nThe planner spent {actions / max(decisions, 1):.1f} env actions per decision "
             f"({decisions} decisions).\n")

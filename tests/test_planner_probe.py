@@ -27,13 +27,31 @@ def test_the_summary_counts_only_the_planners_scenes(tmp_path: pathlib.Path) -> 
     out = tmp_path / "report.md"
     assert planner_probe.main([str(mine), "--against", str(theirs), "--out", str(out)]) == 0
     text = out.read_text()
-    assert "| N | scenes | h-d-planner | h-d | p_s | planner env actions per decision |" in text
-    assert "| 5 | 2 | 2 / 2 (fell 0) | 1 / 2 (fell 1) | 0 / 2 (fell 2) | 7.5 |" in text
-    assert "| 8 | 1 | 0 / 1 (fell 0) | - | 1 / 1 (fell 0) | 7.5 |" in text  # h-d lacks the scene: no count
+    assert ("| N | scenes | h-d-planner | h-d | p_s | planner env actions per decision | margin over the best of "
+            "h-d, h-a (points) |") in text
+    # h-a played none of the scenes: no margin anywhere
+    assert "| 5 | 2 | 2 / 2 (fell 0) | 1 / 2 (fell 1) | 0 / 2 (fell 2) | 7.5 | - |" in text
+    assert "| 8 | 1 | 0 / 1 (fell 0) | - | 1 / 1 (fell 0) | 7.5 | - |" in text  # h-d lacks the scene: no count
+    assert "averaged over the 0 N measured (): none." in text
     assert "| 5 | 0 | 1 | sorted in 10 | fell in 10 | fell in 10 |" in text
     assert "The planner spent 7.5 env actions per decision (12 decisions)." in text
-    assert planner_probe.main([str(mine), "--against", str(theirs), "--out", str(out), "--policies", "p_s"]) == 0
-    assert "| 5 | 2 | 2 / 2 (fell 0) | 0 / 2 (fell 2) | 7.5 |" in out.read_text()
+    assert planner_probe.main([str(mine), "--against", str(theirs), "--out", str(out), "--policies", "p_s",
+                               "--heuristics"]) == 0
+    assert "| 5 | 2 | 2 / 2 (fell 0) | 0 / 2 (fell 2) | 7.5 |\n" in out.read_text()
+    assert "margin" not in out.read_text()
+    # the margin: the planner's SR minus the better heuristic's over the same scenes, per N and averaged
+    assert planner_probe.main([str(mine), "--against", str(theirs), "--out", str(out), "--heuristics", "h-d",
+                               "p_s"]) == 0
+    text = out.read_text()
+    assert "| 5 | 2 | 2 / 2 (fell 0) | 1 / 2 (fell 1) | 0 / 2 (fell 2) | 7.5 | +50.0 |" in text  # 100 - max(50, 0)
+    assert "| 8 | 1 | 0 / 1 (fell 0) | - | 1 / 1 (fell 0) | 7.5 | - |" in text
+    assert "h-d-planner's margin over the best of h-d, p_s averaged over the 1 N measured (5): +50.0 points." in text
+    save_cell(cell_path(theirs, "h-d", "ycb", 8, 0, 1), [record("h-d", 8, 0, False, fell=True)])
+    assert planner_probe.main([str(mine), "--against", str(theirs), "--out", str(out), "--heuristics", "h-d",
+                               "p_s"]) == 0
+    text = out.read_text()
+    assert "| 7.5 | -100.0 |" in text  # N = 8: 0 - max(0, 100)
+    assert "averaged over the 2 N measured (5, 8): -25.0 points." in text
 
 
 def test_a_folder_without_cells_is_one_line(tmp_path: pathlib.Path, capsys) -> None:
