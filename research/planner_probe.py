@@ -30,13 +30,18 @@ def planner_actions(records: list[EpisodeRecord]) -> tuple[int, int]:
     return sum(s.get("actions", 0) for s in stats), decisions
 
 
+def scene_records(policy: str, n: int, scenes: list[tuple[int, int]],
+                  by: dict[tuple[str, int, int, int], EpisodeRecord]) -> list[EpisodeRecord] | None:
+    """``policy``'s episodes on ``scenes`` at N = ``n``; None where it lacks one of them."""
+    records = [by.get((policy, n, seed, run)) for seed, run in scenes]
+    return None if not records or None in records else [r for r in records if r is not None]
+
+
 def sr(policy: str, n: int, scenes: list[tuple[int, int]],
        by: dict[tuple[str, int, int, int], EpisodeRecord]) -> float | None:
     """``policy``'s SR (%) over ``scenes`` at N = ``n``; None where it lacks one of them."""
-    records = [by.get((policy, n, seed, run)) for seed, run in scenes]
-    if not records or any(r is None for r in records):
-        return None
-    return 100.0 * sum(bool(r is not None and r.success) for r in records) / len(records)
+    done = scene_records(policy, n, scenes, by)
+    return None if done is None else 100.0 * sum(r.success for r in done) / len(done)
 
 
 def summary(mine: list[EpisodeRecord], by: dict[tuple[str, int, int, int], EpisodeRecord],
@@ -54,12 +59,9 @@ def summary(mine: list[EpisodeRecord], by: dict[tuple[str, int, int, int], Episo
         scenes = sorted({(r.seed, r.run) for r in mine if r.num_objects == n})
         cells = []
         for policy in policies:
-            records = [by.get((policy, n, seed, run)) for seed, run in scenes]
-            if any(r is None for r in records):
-                cells.append("-")
-                continue
-            done = [r for r in records if r is not None]
-            cells.append(f"{sum(r.success for r in done)} / {len(done)} (fell {sum(r.fell for r in done)})")
+            done = scene_records(policy, n, scenes, by)
+            cells.append("-" if done is None else
+                         f"{sum(r.success for r in done)} / {len(done)} (fell {sum(r.fell for r in done)})")
         actions, decisions = planner_actions([r for r in mine if r.num_objects == n])
         margin = ""
         if heuristics:
