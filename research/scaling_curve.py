@@ -5,9 +5,16 @@ and the fall measurements (``falls.json``, `shelf_env.evaluation.falls`) of the 
 starting model and reference policies, and writes a Markdown table and a PNG (two panels: invalid
 and fallen actions per greedy action at each N; SR at each N; reference policies as dashed lines).
 
+The fall measurement plays 10 scenes per N, too few for SR: with ``--evaluation FOLDER`` (a ``shelf-evaluate``
+folder of the same models, e.g. the §V scenes of three seeds) it adds a second table and a third panel, each
+model's SR per N over every scene of that folder it played and its margin over the best of ``--heuristics``
+on exactly those scenes (`margins`), averaged over the N.
+
     python research/scaling_curve.py results/distill_scaling --out results/distill_scaling/report.md \\
         --png results/distill_scaling/scaling.png
     python research/scaling_curve.py results/distill_test --reports results/distill_scaling ...   # held-out scenes
+    python research/scaling_curve.py results/distill_test --reports results/distill_scaling \\
+        --evaluation results/distill_test --heuristics h-d h-a ...                            # + SR on its cells
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ import pathlib
 from typing import Any
 
 from shelf_env.evaluation.falls import FallEpisode, cell_summary
+from shelf_env.evaluation.protocol import EpisodeRecord, load_cells
 from shelf_env.files import write_text_atomically
 
 
@@ -115,6 +123,56 @@ def table(data: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def margins(data: list[dict[str, Any]], records: list[EpisodeRecord], heuristics: list[str]) -> None:
+    """Add to each row of ``data`` that has episodes in ``records`` (matched by its label, a checkpoint's stem)
+    ``sr_by_n``: per N, its SR (%) over every scene (seed, run) it played there that every heuristic also played,
+    the better heuristic's SR on exactly those scenes, their difference (``margin``, SR points) and the number
+    of scenes; and ``mean_margin``, the margin averaged over the N where the row has one (None where it has
+    none). Each model is compared with the heuristics on its own scenes, so rows with other scene counts are
+    each fair, not comparable with one another to the point. ``ValueError`` naming a heuristic the records
+    lack, or when no row has a scene in common with the heuristics."""
+    by: dict[tuple[str, int], dict[tuple[int, int], bool]] = {}
+    for r in records:
+        by.setdefault((r.policy, r.num_objects), {})[(r.seed, r.run)] = r.success
+    for name in heuristics:
+        if not any(policy == name for policy, _ in by):
+            raise ValueError(f"the evaluation cells hold no episode of the heuristic {name!r}")
+    for row in data:
+        row["sr_by_n"] = {}
+        for (policy, n), mine in sorted(by.items()):
+            if policy != row["policy"] or policy in heuristics:
+                continue
+            scenes = sorted(set(mine).intersection(*(by.get((h, n), {}).keys() for h in heuristics)))
+            if not scenes:
+                continue
+            best = max(100.0 * sum(by[(h, n)][s] for s in scenes) / len(scenes) for h in heuristics)
+            sr = 100.0 * sum(mine[s] for s in scenes) / len(scenes)
+            row["sr_by_n"][n] = {"sr": sr, "best_heuristic": best, "margin": sr - best, "scenes": len(scenes)}
+        found = [c["margin"] for c in row["sr_by_n"].values()]
+        row["mean_margin"] = sum(found) / len(found) if found else None
+    if not any(row["sr_by_n"] for row in data):
+        raise ValueError("the evaluation cells hold no episode of a policy on the curve on the heuristics' scenes")
+
+
+def margin_table(data: list[dict[str, Any]], heuristics: list[str]) -> str:
+    """The rows with `margins`: per N "SR (margin; scenes)" and the mean margin."""
+    shown = [r for r in data if r.get("sr_by_n")]
+    ns = sorted({n for r in shown for n in r["sr_by_n"]})
+    best = " / ".join(heuristics)
+    head = ["policy", "states distilled"] + [f"SR N = {n} (margin over best of {best}; scenes)" for n in ns] + \
+        ["margin averaged over N (points)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in shown:
+        cells = [r["policy"], "-" if r["states"] is None else str(r["states"])]
+        for n in ns:
+            c = r["sr_by_n"].get(n)
+            cells.append("-" if c is None else f"{c['sr']:.1f} % ({c['margin']:+.1f}; {c['scenes']})")
+        cells.append(f"{r['mean_margin']:+.1f}" + ("" if len(r["sr_by_n"]) == len(ns) else
+                                                    f" (N = {', '.join(map(str, sorted(r['sr_by_n'])))})"))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
     import matplotlib
 
@@ -130,7 +188,9 @@ def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
     recipes = sorted(name for name, k in counts.items() if k >= 2)  # curves; single models: the table only
     extra = [r for r in data if r["wrapped"] and r["states"] is not None]
     refs = [r for r in data if r["states"] is None and not r["zip"]]  # named policies (the heuristics)
-    fig, (ax_f, ax_s) = plt.subplots(1, 2, figsize=(11, 5))
+    evaluated = any(r.get("sr_by_n") for r in data)
+    fig, axes = plt.subplots(1, 3 if evaluated else 2, figsize=(16.5 if evaluated else 11, 5))
+    ax_f, ax_s = axes[0], axes[1]
     styles = ["o-", "s--", "^:", "d-."]
     for i, n in enumerate(ns):
         colour = f"C{i}"
@@ -141,6 +201,10 @@ def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
                 continue
             ax_f.plot([p[0] for p in pts], [100 * c["invalid_rate"] for _, c in pts], styles[j % 4], color=colour)
             ax_s.plot([p[0] for p in pts], [c["sr"] for _, c in pts], styles[j % 4], color=colour)
+            if evaluated:  # the margin on the evaluation's scenes, where two or more of the curve have one
+                held = [(r["states"], r["sr_by_n"][n]["margin"]) for r in curve if n in r.get("sr_by_n", {})]
+                if len(held) >= 2:
+                    axes[2].plot([h[0] for h in held], [h[1] for h in held], styles[j % 4], color=colour)
         ax_f.plot([], [], "-", color=colour, label=f"N = {n}")
         for r in extra:
             if n in r["by_n"]:
@@ -155,6 +219,10 @@ def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
     ax_f.set(xlabel="training states distilled", ylabel="greedy actions ending the episode invalid (%)",
              title="invalid actions per greedy action")
     ax_s.set(xlabel="training states distilled", ylabel="SR (%)", title="greedy SR")
+    if evaluated:
+        axes[2].axhline(0.0, color="black", lw=1)
+        axes[2].set(xlabel="training states distilled", ylabel="SR minus the best heuristic's (points)",
+                    title="margin over the best heuristic, evaluation scenes")
     names = ", ".join(r["policy"] for r in refs)
     title = "distillation scaling" + (f" (horizontal: {names})" if refs else "") + \
         (f" (stars: {', '.join(sorted({r['policy'].partition('+')[2] for r in extra}))})" if extra else "")
@@ -176,9 +244,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--png", type=pathlib.Path, default=None, help="write the plot here")
     p.add_argument("--reports", type=pathlib.Path, default=None, help="the folder of the distillation reports "
                    "(default: the results folder), e.g. the held-out measurements of models distilled elsewhere")
+    p.add_argument("--evaluation", type=pathlib.Path, default=None, help="a shelf-evaluate folder of the same "
+                   "models and the heuristics: adds each model's SR and margin over the best heuristic on its scenes")
+    p.add_argument("--heuristics", nargs="+", default=["h-d", "h-a"], help="the policies the margin is taken "
+                   "over (default: h-d h-a)")
     args = p.parse_args(argv)
     data = rows(*load(args.folder, args.reports))
     text = table(data)
+    if args.evaluation is not None:
+        margins(data, load_cells(args.evaluation), args.heuristics)
+        text += "\n" + margin_table(data, args.heuristics)
     print(text)
     if args.out is not None:
         write_text_atomically(args.out, text)

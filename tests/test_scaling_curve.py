@@ -1,11 +1,15 @@
 """research/scaling_curve.py: the distilled models sit on the curve by their training states, the starting
 model at 0, reference policies as dashed lines; the table shows each cell's counts."""
 
+import dataclasses
 import json
 import pathlib
 
+import pytest
+
 from research import scaling_curve
 from shelf_env.evaluation import falls
+from shelf_env.evaluation.protocol import EpisodeRecord, load_cells
 
 
 def cell(policy: str, n: int, decisions: int, invalid: int, sorted_: int) -> dict:
@@ -60,3 +64,48 @@ def test_the_recipe_names_every_option_that_differs_from_the_defaults() -> None:
     assert scaling_curve.recipe(report | {"teacher_radius": 0, "teacher_weight": 1.0, "epochs": 24,
                                           "shards": ["s00_00000.npz", "s01_00000.npz"]}) == \
         "augmented, teacher over allowed actions, progress, anchor 1, 24 epochs, + series s01"
+
+
+def episodes(policy: str, n: int, seeds: list[int], sorted_runs: set[tuple[int, int]]) -> list[dict]:
+    return [dataclasses.asdict(EpisodeRecord(policy, "ycb", n, seed, run, (seed, run) in sorted_runs, 10, n, False))
+            for seed in seeds for run in range(4)]
+
+
+def test_the_margin_is_taken_over_the_better_heuristic_on_each_models_own_scenes(tmp_path: pathlib.Path) -> None:
+    start = "examples/pretrained/p_s.zip"
+    (tmp_path / "p_s_d100.distill.json").write_text(json.dumps(
+        {"init": start, "train_states": 100, "history": [{"epoch": 0, "val": {"loss": 9.0}}]}))
+    (tmp_path / "falls.json").write_text(json.dumps({"0": cell(start, 8, 100, 20, 1),
+                                                     "1": cell("runs/p_s_d100.zip", 8, 100, 5, 3)}))
+    cells = tmp_path / "cells"
+    cells.mkdir()
+    # N = 8: the heuristics played seeds 0 and 1 (8 scenes); p_s_d100 seed 0 only, p_s both.
+    # h-d sorts runs 0-1 of seed 0 and all of seed 1, h-a runs 0-3 of seed 0: on seed 0 h-a is the better (4/4),
+    # on seeds 0 and 1 h-d (6/8 against h-a's 4/8).
+    played = {"h-d": ([0, 1], {(0, 0), (0, 1)} | {(1, r) for r in range(4)}),
+              "h-a": ([0, 1], {(0, r) for r in range(4)}),
+              "p_s_d100": ([0], {(0, 0), (0, 1), (0, 2)}), "p_s": ([0, 1], {(0, 0), (1, 0)}),
+              "other": ([0], set())}  # a policy off the curve: not a row
+    for policy, (seeds, sorted_runs) in played.items():
+        (cells / f"{policy}__ycb__N08.json").write_text(json.dumps(episodes(policy, 8, seeds, sorted_runs)))
+    (cells / "p_s__ycb__N05.json").write_text(json.dumps(episodes("p_s", 5, [0], {(0, 0)})))  # no heuristic at N = 5
+    data = scaling_curve.rows(*scaling_curve.load(tmp_path))
+    scaling_curve.margins(data, load_cells(tmp_path), ["h-d", "h-a"])
+    by = {r["policy"]: r for r in data}
+    assert by["p_s_d100"]["sr_by_n"] == {8: {"sr": 75.0, "best_heuristic": 100.0, "margin": -25.0, "scenes": 4}}
+    assert by["p_s"]["sr_by_n"] == {8: {"sr": 25.0, "best_heuristic": 75.0, "margin": -50.0, "scenes": 8}}
+    assert by["p_s"]["mean_margin"] == -50.0
+    text = scaling_curve.margin_table(data, ["h-d", "h-a"])
+    assert "| p_s | 0 | 25.0 % (-50.0; 8) | -50.0 |" in text
+    assert "| p_s_d100 | 100 | 75.0 % (-25.0; 4) | -25.0 |" in text
+    png = tmp_path / "curve.png"
+    out = tmp_path / "curve.md"
+    assert scaling_curve.main([str(tmp_path), "--evaluation", str(tmp_path), "--out", str(out), "--png", str(png)]) == 0
+    assert "SR N = 8 (margin over best of h-d / h-a; scenes)" in out.read_text()
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(ValueError, match="no episode of the heuristic 'h-x'"):
+        scaling_curve.margins(data, load_cells(tmp_path), ["h-d", "h-x"])
+    for path in cells.glob("p_s*"):
+        path.unlink()
+    with pytest.raises(ValueError, match="no episode of a policy on the curve"):
+        scaling_curve.margins(data, load_cells(tmp_path), ["h-d", "h-a"])
