@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import pathlib
 from typing import Any
 
@@ -173,6 +174,30 @@ def margin_table(data: list[dict[str, Any]], heuristics: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def trend(data: list[dict[str, Any]], targets: tuple[float, ...] = (0.0, 15.0)) -> list[str]:
+    """For every recipe with three or more distilled models whose margins cover the same N (`margins`), the
+    least-squares line of the averaged margin against log2 of the training states: points per doubling of the
+    data and, where it rises, the states at which the line reaches each of ``targets`` (SR points over the best
+    heuristic). An extrapolation of a few noisy points, printed as such, not a measurement."""
+    lines = []
+    for name in sorted({r["recipe"] for r in data if r["recipe"] is not None and not r["wrapped"]}):
+        pts = [r for r in data if r["recipe"] == name and not r["wrapped"] and r.get("mean_margin") is not None]
+        if len({frozenset(r["sr_by_n"]) for r in pts}) != 1 or len({r["states"] for r in pts}) < 3:
+            continue
+        x = [math.log2(r["states"]) for r in pts]
+        y = [r["mean_margin"] for r in pts]
+        mx, my = sum(x) / len(x), sum(y) / len(y)
+        slope = sum((a - mx) * (b - my) for a, b in zip(x, y)) / sum((a - mx) ** 2 for a in x)
+        line = (f"- {name}: {len(pts)} models ({', '.join(str(r['states']) for r in pts)} states), margin averaged "
+                f"over N = {', '.join(map(str, sorted(pts[0]['sr_by_n'])))}: {slope:+.1f} points per doubling of the "
+                f"training states (least squares in log2 of the states)")
+        if slope > 0:
+            reach = [f"{t:+g} at ~{2 ** (mx + (t - my) / slope):,.0f} states" for t in targets]
+            line += "; extrapolated, the line reaches " + ", ".join(reach)
+        lines.append(line + ".")
+    return lines
+
+
 def plot(data: list[dict[str, Any]], png: pathlib.Path) -> None:
     import matplotlib
 
@@ -254,6 +279,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.evaluation is not None:
         margins(data, load_cells(args.evaluation), args.heuristics)
         text += "\n" + margin_table(data, args.heuristics)
+        fits = trend(data)
+        if fits:
+            text += "\nThe trend (an extrapolation, not a measurement):\n\n" + "\n".join(fits) + "\n"
     print(text)
     if args.out is not None:
         write_text_atomically(args.out, text)

@@ -109,3 +109,21 @@ def test_the_margin_is_taken_over_the_better_heuristic_on_each_models_own_scenes
         path.unlink()
     with pytest.raises(ValueError, match="no episode of a policy on the curve"):
         scaling_curve.margins(data, load_cells(tmp_path), ["h-d", "h-a"])
+
+
+def test_the_trend_fits_the_margin_against_doublings_of_the_data() -> None:
+    def row(states: int, margin: float, recipe: str = "r", ns: tuple[int, ...] = (5, 8)) -> dict:
+        return {"policy": f"m{states}", "states": states, "recipe": recipe, "wrapped": False,
+                "sr_by_n": {n: {"margin": margin} for n in ns}, "mean_margin": margin}
+
+    rising = [row(1000, -20.0), row(2000, -15.0), row(4000, -10.0)]
+    (line,) = scaling_curve.trend(rising)
+    assert "r: 3 models (1000, 2000, 4000 states)" in line and "N = 5, 8" in line
+    assert "+5.0 points per doubling" in line and "+0 at ~16,000 states, +15 at ~128,000 states" in line
+    falling = [row(1000, -10.0, "f"), row(2000, -12.0, "f"), row(4000, -14.0, "f")]
+    (line,) = scaling_curve.trend(falling)
+    assert "-2.0 points per doubling" in line and "reaches" not in line
+    # two points, or models measured over other N, or a wrapped model: no line
+    assert scaling_curve.trend(rising[:2]) == []
+    assert scaling_curve.trend(rising[:2] + [row(4000, -10.0, ns=(8,))]) == []
+    assert scaling_curve.trend(rising[:2] + [row(4000, -10.0) | {"wrapped": True}]) == []
