@@ -53,6 +53,8 @@ SHARDS=s00:55,s01:7 distil p_s_dagger7_aug_mpa_pr2_p5 all --anchor 1.0 --progres
 SHARDS=s00:55,s01:7 distil p_s_dagger7_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
 # the cross-entropy recipe at the third session's dataset (55 shards of series 0, 19 of series 1): the scaling point
 SHARDS=s00:55,s01:19 distil p_s_dagger19_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
+# ... and at the fifth session's dataset (55 + 48 shards: 4,338 states, 3,626 of them for training): the next point
+SHARDS=s00:55,s01:48 distil p_s_dagger48_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
 
 # B + 45 min of PixelDoubleDQN with the dataset as demonstrations (the data/teacher of the time: 37 shards)
 if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then
