@@ -7,10 +7,29 @@
 # planner's margin over the better of H-d and H-a per N, averaged over the N measured.
 # Resumable cell by cell (one N per call, so that a stopped run keeps the N it finished).
 #   bash results/planning_teacher/run.sh [N ...]        # 10 scenes each; default: 3 4 5 6 7 8 9 10 11
+#   bash results/planning_teacher/run.sh closed_safe [N ...]   # closed loop (the watch's defaults) + safe picks,
+#       the first 10 scenes of seed 0 at each N (default: 5 8 3 4 6 7), beside the policies that played them under
+#       the same conditions (results/privileged_ceiling: H-d, H-a, their loop-breaker variants, the one-step
+#       lookahead + LB, the shipped P+S + LB) -> results/planning_teacher/closed_safe/ (report.md)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1
 out=results/planning_teacher
+if [ "${1:-}" = closed_safe ]; then
+  shift
+  out=$out/closed_safe
+  grid=(--runs 10 --seeds 1 --object-sets ycb --closed-loop '{}' --safe-picks --out $out)
+  for n in "${@:-5 8 3 4 6 7}"; do
+    for k in $n; do
+      .venv/bin/shelf-evaluate --policies h-d-planner --ns "$k" "${grid[@]}" --workers 1
+    done
+  done
+  ns=$(ls $out/cells | sed -n "s/.*__N0*\([0-9][0-9]*\)__.*/\1/p" | sort -n | paste -sd, -)
+  .venv/bin/shelf-evaluate --policies h-d-planner --ns "$ns" "${grid[@]}" --summarize-only
+  .venv/bin/python research/planner_probe.py $out --against results/privileged_ceiling --out $out/report.md \
+    --policies h-d h-a h-d+loop-breaker h-a+loop-breaker h-d-lookahead+loop-breaker p_s+loop-breaker
+  exit 0
+fi
 [ -f $out/teacher_cost.txt ] || .venv/bin/python benchmarks/teacher_cost.py --ns 3 5 8 13 --scenes 2 --decisions 3 \
   > $out/teacher_cost.txt
 for n in "${@:-3 4 5 6 7 8 9 10 11}"; do
