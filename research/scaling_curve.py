@@ -175,14 +175,16 @@ def margin_table(data: list[dict[str, Any]], heuristics: list[str]) -> str:
 
 
 def trend(data: list[dict[str, Any]], targets: tuple[float, ...] = (0.0, 15.0)) -> list[str]:
-    """For every recipe with three or more distilled models whose margins cover the same N (`margins`), the
+    """For every recipe with three or more distilled models whose margins cover the same N with as many scenes
+    each (`margins`; a curve mixing 30- and 90-scene points is left out), the
     least-squares line of the averaged margin against log2 of the training states: points per doubling of the
     data and, where it rises, the states at which the line reaches each of ``targets`` (SR points over the best
     heuristic). An extrapolation of a few noisy points, printed as such, not a measurement."""
     lines = []
     for name in sorted({r["recipe"] for r in data if r["recipe"] is not None and not r["wrapped"]}):
         pts = [r for r in data if r["recipe"] == name and not r["wrapped"] and r.get("mean_margin") is not None]
-        if len({frozenset(r["sr_by_n"]) for r in pts}) != 1 or len({r["states"] for r in pts}) < 3:
+        if len({frozenset((n, c.get("scenes")) for n, c in r["sr_by_n"].items()) for r in pts}) != 1 \
+                or len({r["states"] for r in pts}) < 3:
             continue
         x = [math.log2(r["states"]) for r in pts]
         y = [r["mean_margin"] for r in pts]

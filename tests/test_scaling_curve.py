@@ -127,3 +127,6 @@ def test_the_trend_fits_the_margin_against_doublings_of_the_data() -> None:
     assert scaling_curve.trend(rising[:2]) == []
     assert scaling_curve.trend(rising[:2] + [row(4000, -10.0, ns=(8,))]) == []
     assert scaling_curve.trend(rising[:2] + [row(4000, -10.0) | {"wrapped": True}]) == []
+    fewer = row(4000, -10.0)  # measured on fewer scenes than the others
+    fewer["sr_by_n"][5]["scenes"] = 30
+    assert scaling_curve.trend(rising[:2] + [fewer]) == []
