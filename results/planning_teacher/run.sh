@@ -15,33 +15,31 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1
 out=results/planning_teacher
+planner() { .venv/bin/shelf-evaluate --policies h-d-planner --seeds 1 --object-sets ycb "$@"; }
+each_n() {  # NS OPTIONS...: one planner call per N of NS (a stopped run keeps every N it finished)
+  local ns=$1
+  shift
+  for k in $ns; do
+    planner --ns "$k" --workers 1 "$@"
+  done
+}
 if [ "${1:-}" = closed_safe ]; then
   shift
   out=$out/closed_safe
-  grid=(--runs 10 --seeds 1 --object-sets ycb --closed-loop '{}' --safe-picks --out $out)
-  for n in "${@:-5 8 3 4 6 7}"; do
-    for k in $n; do
-      .venv/bin/shelf-evaluate --policies h-d-planner --ns "$k" "${grid[@]}" --workers 1
-    done
-  done
+  grid=(--runs 10 --closed-loop '{}' --safe-picks --out $out)
+  each_n "${*:-5 8 3 4 6 7}" "${grid[@]}"
   ns=$(ls $out/cells | sed -n "s/.*__N0*\([0-9][0-9]*\)__.*/\1/p" | sort -n | paste -sd, -)
-  .venv/bin/shelf-evaluate --policies h-d-planner --ns "$ns" "${grid[@]}" --summarize-only
+  planner --ns "$ns" "${grid[@]}" --summarize-only
   .venv/bin/python research/planner_probe.py $out --against results/privileged_ceiling --out $out/report.md \
     --policies h-d h-a h-d+loop-breaker h-a+loop-breaker h-d-lookahead+loop-breaker p_s+loop-breaker
   exit 0
 fi
 [ -f $out/teacher_cost.txt ] || .venv/bin/python benchmarks/teacher_cost.py --ns 3 5 8 13 --scenes 2 --decisions 3 \
   > $out/teacher_cost.txt
-for n in "${@:-3 4 5 6 7 8 9 10 11}"; do
-  for k in $n; do
-    .venv/bin/shelf-evaluate --policies h-d-planner --ns "$k" --runs 10 --seeds 1 --object-sets ycb --out $out --workers 1
-  done
-done
-for n in 12 13 14; do
-  .venv/bin/shelf-evaluate --policies h-d-planner --ns $n --runs 3 --seeds 1 --object-sets ycb --out $out --workers 1
-done
+each_n "${*:-3 4 5 6 7 8 9 10 11}" --runs 10 --out $out
+each_n "12 13 14" --runs 3 --out $out
 # results.json / results.csv / the plot: every 10-scene cell on disk (each call above wrote its own N only)
-.venv/bin/shelf-evaluate --policies h-d-planner --ns 3-11 --runs 10 --seeds 1 --object-sets ycb --out $out --summarize-only
+planner --ns 3-11 --runs 10 --out $out --summarize-only
 .venv/bin/python research/planner_probe.py $out --against results/distill_test results/privileged_ceiling_open \
   results/models --out $out/report.md \
   --policies h-d h-a h-d+loop-breaker h-a+loop-breaker h-d-lookahead+loop-breaker p_s s
