@@ -19,7 +19,14 @@ import argparse
 import pathlib
 import sys
 
-from shelf_env.evaluation.protocol import EpisodeRecord, load_cells
+from shelf_env.evaluation.protocol import (
+    EpisodeRecord,
+    SceneIndex,
+    by_scene,
+    load_cells,
+    margin_over_best,
+    scene_episodes,
+)
 from shelf_env.files import write_text_atomically
 
 
@@ -30,26 +37,13 @@ def planner_actions(records: list[EpisodeRecord]) -> tuple[int, int]:
     return sum(s.get("actions", 0) for s in stats), decisions
 
 
-def scene_records(policy: str, n: int, scenes: list[tuple[int, int]],
-                  by: dict[tuple[str, int, int, int], EpisodeRecord]) -> list[EpisodeRecord] | None:
-    """``policy``'s episodes on ``scenes`` at N = ``n``; None where it lacks one of them."""
-    records = [by.get((policy, n, seed, run)) for seed, run in scenes]
-    return None if not records or None in records else [r for r in records if r is not None]
-
-
-def sr(policy: str, n: int, scenes: list[tuple[int, int]],
-       by: dict[tuple[str, int, int, int], EpisodeRecord]) -> float | None:
-    """``policy``'s SR (%) over ``scenes`` at N = ``n``; None where it lacks one of them."""
-    done = scene_records(policy, n, scenes, by)
-    return None if done is None else 100.0 * sum(r.success for r in done) / len(done)
-
-
-def summary(mine: list[EpisodeRecord], by: dict[tuple[str, int, int, int], EpisodeRecord],
-            policies: list[str], heuristics: list[str] | None = None) -> list[str]:
+def summary(mine: list[EpisodeRecord], by: SceneIndex, policies: list[str],
+            heuristics: list[str] | None = None) -> list[str]:
     """Markdown rows: per N, each policy's "sorted k / n (fell f)" over the planner's scenes at that N, the
     planner's env actions per decision there and, with ``heuristics``, the planner's margin over the better
     of them (SR points; "-" where one lacks a scene), then a line with that margin averaged over the N that
-    have one; ``by``: every episode by (policy, N, seed, run). A policy missing one of those scenes shows "-"."""
+    have one; ``by``: every episode by (policy, N) and scene (`by_scene`). A policy missing one of those scenes
+    shows "-"."""
     planner = sorted({r.policy for r in mine})[0]
     margin_head = f" margin over the best of {', '.join(heuristics)} (points) |" if heuristics else ""
     rows = ["| N | scenes | " + " | ".join(policies) + " | planner env actions per decision |" + margin_head,
@@ -59,16 +53,15 @@ def summary(mine: list[EpisodeRecord], by: dict[tuple[str, int, int, int], Episo
         scenes = sorted({(r.seed, r.run) for r in mine if r.num_objects == n})
         cells = []
         for policy in policies:
-            done = scene_records(policy, n, scenes, by)
+            done = scene_episodes(by, policy, n, scenes)
             cells.append("-" if done is None else
                          f"{sum(r.success for r in done)} / {len(done)} (fell {sum(r.fell for r in done)})")
         actions, decisions = planner_actions([r for r in mine if r.num_objects == n])
         margin = ""
         if heuristics:
-            theirs = [sr(h, n, scenes, by) for h in heuristics]
-            mine_sr = sr(planner, n, scenes, by)
-            if mine_sr is not None and all(t is not None for t in theirs):
-                margins[n] = mine_sr - max(t for t in theirs if t is not None)
+            paired = margin_over_best(by, planner, n, scenes, heuristics)
+            if paired is not None:
+                margins[n] = paired["margin"]
             margin = f" {margins[n]:+.1f} |" if n in margins else " - |"
         rows.append(f"| {n} | {len(scenes)} | " + " | ".join(cells) + f" | {actions / max(decisions, 1):.1f} |"
                     + margin)
@@ -102,12 +95,12 @@ def main(argv: list[str] | None = None) -> int:
               f"(policies there: {sorted(played)})", file=sys.stderr)
         return 2
     policies = sorted({r.policy for r in mine}) + (args.policies if args.policies is not None else sorted(played))
-    by = {(r.policy, r.num_objects, r.seed, r.run): r for r in [*others, *mine]}
+    by = by_scene([*others, *mine])
     rows = ["| N | seed | run | " + " | ".join(policies) + " |", "|---|---|---|" + "---|" * len(policies)]
     for n, seed, run in keys:
         cells = []
         for policy in policies:
-            r = by.get((policy, n, seed, run))
+            r = by.get((policy, n), {}).get((seed, run))
             cells.append("-" if r is None else f"{'sorted' if r.success else r.failure or 'failed'} in {r.actions}")
         rows.append(f"| {n} | {seed} | {run} | " + " | ".join(cells) + " |")
     actions, decisions = planner_actions(mine)

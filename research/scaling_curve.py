@@ -26,7 +26,7 @@ import pathlib
 from typing import Any
 
 from shelf_env.evaluation.falls import FallEpisode, cell_summary
-from shelf_env.evaluation.protocol import EpisodeRecord, load_cells
+from shelf_env.evaluation.protocol import EpisodeRecord, by_scene, common_scenes, load_cells, margin_over_best
 from shelf_env.files import write_text_atomically
 
 
@@ -132,23 +132,22 @@ def margins(data: list[dict[str, Any]], records: list[EpisodeRecord], heuristics
     none). Each model is compared with the heuristics on its own scenes, so rows with other scene counts are
     each fair, not comparable with one another to the point. ``ValueError`` naming a heuristic the records
     lack, or when no row has a scene in common with the heuristics."""
-    by: dict[tuple[str, int], dict[tuple[int, int], bool]] = {}
-    for r in records:
-        by.setdefault((r.policy, r.num_objects), {})[(r.seed, r.run)] = r.success
+    index = by_scene(records)
     for name in heuristics:
-        if not any(policy == name for policy, _ in by):
+        if not any(policy == name for policy, _ in index):
             raise ValueError(f"the evaluation cells hold no episode of the heuristic {name!r}")
     for row in data:
         row["sr_by_n"] = {}
-        for (policy, n), mine in sorted(by.items()):
-            if policy != row["policy"] or policy in heuristics:
+        if row["policy"] in heuristics:
+            continue
+        for policy, n in sorted(index):
+            if policy != row["policy"]:
                 continue
-            scenes = sorted(set(mine).intersection(*(by.get((h, n), {}).keys() for h in heuristics)))
-            if not scenes:
-                continue
-            best = max(100.0 * sum(by[(h, n)][s] for s in scenes) / len(scenes) for h in heuristics)
-            sr = 100.0 * sum(mine[s] for s in scenes) / len(scenes)
-            row["sr_by_n"][n] = {"sr": sr, "best_heuristic": best, "margin": sr - best, "scenes": len(scenes)}
+            scenes = common_scenes(index, [policy, *heuristics], n)
+            paired = margin_over_best(index, policy, n, scenes, heuristics) if scenes else None
+            if paired is not None:
+                row["sr_by_n"][n] = {"sr": paired["sr"], "best_heuristic": paired["best"],
+                                     "margin": paired["margin"], "scenes": len(scenes)}
         found = [c["margin"] for c in row["sr_by_n"].values()]
         row["mean_margin"] = sum(found) / len(found) if found else None
     if not any(row["sr_by_n"] for row in data):

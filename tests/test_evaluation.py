@@ -40,6 +40,32 @@ def test_metrics_on_hand_made_records():
     assert none["sr_mean"] == 0.0 and math.isnan(none["ae_mean"]) and math.isnan(none["mae_mean"])
 
 
+def test_paired_comparison_reads_exactly_the_same_scenes():
+    # p played scenes (0,0) (0,1) (0,2); h-d all four; h-a only (0,0) (0,1) (0,3)
+    records = [rec(0, 0, True, 5, policy="p"), rec(0, 1, True, 5, policy="p"), rec(0, 2, False, 40, policy="p"),
+               *(rec(0, run, run != 1, 5, policy="h-d") for run in range(4)),
+               rec(0, 0, False, 40, policy="h-a"), rec(0, 1, True, 5, policy="h-a"), rec(0, 3, True, 5, policy="h-a"),
+               rec(0, 0, False, 40, policy="p", n=8)]
+    index = ev.by_scene(records)
+    assert ev.common_scenes(index, ["p", "h-d", "h-a"], 3) == [(0, 0), (0, 1)]
+    assert ev.common_scenes(index, ["p", "h-d"], 3) == [(0, 0), (0, 1), (0, 2)]
+    assert ev.common_scenes(index, ["p", "nobody"], 3) == []
+    assert [r.run for r in ev.scene_episodes(index, "p", 3, [(0, 2), (0, 0)])] == [2, 0]
+    assert ev.scene_episodes(index, "p", 3, [(0, 3)]) is None  # a scene it did not play: no count at all
+    assert ev.scene_episodes(index, "p", 3, []) is None
+    assert ev.paired_sr(index, "p", 3, [(0, 0), (0, 1), (0, 2)]) == pytest.approx(200 / 3)
+    assert ev.paired_sr(index, "p", 8, [(0, 0)]) == 0.0  # N is part of the key
+    # over (0,0) (0,1): p sorts 2/2, h-d 1/2, h-a 1/2 -> +50 over the better
+    assert ev.margin_over_best(index, "p", 3, [(0, 0), (0, 1)], ["h-d", "h-a"]) == \
+        {"sr": 100.0, "best": 50.0, "margin": 50.0}
+    # over (0,0) (0,1) (0,2): h-a lacks (0,2), so there is no paired margin; h-d alone sorts 2/3 like p
+    assert ev.margin_over_best(index, "p", 3, [(0, 0), (0, 1), (0, 2)], ["h-d", "h-a"]) is None
+    assert ev.margin_over_best(index, "p", 3, [(0, 0), (0, 1), (0, 2)], ["h-d"])["margin"] == pytest.approx(0.0)
+    assert ev.margin_over_best(index, "p", 3, [(0, 0)], []) is None
+    # a later record of the same episode replaces the earlier one
+    assert ev.by_scene([rec(0, 0, False, 40), rec(0, 0, True, 4)])[("h-d", 3)][(0, 0)].success
+
+
 def test_fig12_has_one_line_per_policy_and_object_set(tmp_path):
     records = [EpisodeRecord(policy, oset, n, seed, 0, seed == 0, 5, 2, False)
                for policy in ("h-a", "h-d") for oset in ("train", "ycb") for n in (3, 4) for seed in (0, 1)]

@@ -307,6 +307,54 @@ def summarize(records: list[EpisodeRecord]) -> list[dict[str, Any]]:
     return rows
 
 
+# ---------------------------------------------------------------- paired comparisons
+#: Episodes by (policy, N) and then by scene (seed, run): what a comparison on the same scenes reads.
+SceneIndex = dict[tuple[str, int], dict[tuple[int, int], EpisodeRecord]]
+
+
+def by_scene(records: list[EpisodeRecord]) -> SceneIndex:
+    """Every episode of ``records`` by (policy, N) and then by its scene (seed, run); of two records of one
+    episode the later one is kept (the order in which folders were read)."""
+    index: SceneIndex = {}
+    for r in records:
+        index.setdefault((r.policy, r.num_objects), {})[(r.seed, r.run)] = r
+    return index
+
+
+def scene_episodes(index: SceneIndex, policy: str, n: int,
+                   scenes: list[tuple[int, int]]) -> list[EpisodeRecord] | None:
+    """``policy``'s episodes on exactly ``scenes`` at N = ``n``, in their order; None where it lacks one of them
+    (or ``scenes`` is empty): a count over other scenes would not be paired."""
+    played = index.get((policy, n), {})
+    found = [played.get(scene) for scene in scenes]
+    return [r for r in found if r is not None] if found and None not in found else None
+
+
+def paired_sr(index: SceneIndex, policy: str, n: int, scenes: list[tuple[int, int]]) -> float | None:
+    """``policy``'s SR (%) over exactly ``scenes`` at N = ``n``; None where it lacks one of them."""
+    done = scene_episodes(index, policy, n, scenes)
+    return None if done is None else 100.0 * sum(r.success for r in done) / len(done)
+
+
+def common_scenes(index: SceneIndex, policies: list[str], n: int) -> list[tuple[int, int]]:
+    """The scenes (seed, run) at N = ``n`` that every one of ``policies`` played, sorted."""
+    sets = [set(index.get((p, n), {})) for p in policies]
+    return sorted(set.intersection(*sets)) if sets else []
+
+
+def margin_over_best(index: SceneIndex, policy: str, n: int, scenes: list[tuple[int, int]],
+                     rivals: list[str]) -> dict[str, float] | None:
+    """``policy``'s SR on ``scenes`` at N = ``n`` (``sr``), the best of ``rivals``' SRs on exactly those scenes
+    (``best``) and the difference (``margin``, SR points): how the paper's §V compares a learned policy with the
+    better heuristic. None where ``policy`` or a rival lacks one of the scenes, or ``rivals`` is empty."""
+    mine = paired_sr(index, policy, n, scenes)
+    theirs = [paired_sr(index, rival, n, scenes) for rival in rivals]
+    if mine is None or not theirs or any(t is None for t in theirs):
+        return None
+    best = max(t for t in theirs if t is not None)
+    return {"sr": mine, "best": best, "margin": mine - best}
+
+
 # ---------------------------------------------------------------- files
 def cell_path(out: pathlib.Path, policy: str, object_set: str, n: int, seed: int, runs: int) -> pathlib.Path:
     return out / "cells" / f"{policy_label(policy)}__{object_set}__N{n:02d}__seed{seed}__runs{runs}.json"
