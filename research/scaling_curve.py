@@ -51,7 +51,9 @@ EPOCHS = 8
 
 def recipe(report: dict[str, Any]) -> str:
     """A distillation's recipe in words, from its report (older reports lack the later options): the options
-    that differ from the defaults, epochs other than `EPOCHS`, and the shard series beyond the first."""
+    that differ from the defaults, epochs other than `EPOCHS`, and whether shards of the DAgger series (every
+    series after s00, each driven by a later learner) were distilled: which of those series is data, not recipe, so
+    models distilled from a dataset that grew into a new series stay on one curve."""
     parts = ["augmented" if report.get("augment") else "as stored",
              "teacher over allowed actions" if report.get("masks") else "teacher over labels"]
     if report.get("progress"):
@@ -70,9 +72,8 @@ def recipe(report: dict[str, Any]) -> str:
         parts.append(f"teacher cross-entropy at {report['teacher_temperature']:g}")
     if report.get("epochs", EPOCHS) != EPOCHS:
         parts.append(f"{report['epochs']} epochs")
-    series = sorted({name[:3] for name in report.get("shards", [])} - {"s00"})
-    if series:
-        parts.append("+ series " + ", ".join(series))
+    if {name[:3] for name in report.get("shards", [])} - {"s00"}:
+        parts.append("+ DAgger series")
     return ", ".join(parts)
 
 

@@ -63,7 +63,9 @@ def test_the_recipe_names_every_option_that_differs_from_the_defaults() -> None:
         "augmented, teacher over allowed actions, progress, anchor 1"
     assert scaling_curve.recipe(report | {"teacher_radius": 0, "teacher_weight": 1.0, "epochs": 24,
                                           "shards": ["s00_00000.npz", "s01_00000.npz"]}) == \
-        "augmented, teacher over allowed actions, progress, anchor 1, 24 epochs, + series s01"
+        "augmented, teacher over allowed actions, progress, anchor 1, 24 epochs, + DAgger series"
+    assert scaling_curve.recipe(report | {"shards": ["s00_00000.npz", "s01_00000.npz"]}) == \
+        scaling_curve.recipe(report | {"shards": ["s00_00000.npz", "s01_00000.npz", "s02_00000.npz"]})
 
 
 def episodes(policy: str, n: int, seeds: list[int], sorted_runs: set[tuple[int, int]]) -> list[dict]:
