@@ -62,10 +62,19 @@ for m in p_s_dagger75_aug_mpa_r2_ce1 p_s_dagger48_aug_mpa_r2_ce1 p_s_dagger19_au
   .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
     --out results/distill_test "$@"
 done
+# ... the 4,797-state model fine-tuned for 30 min with PixelDoubleDQN (the paper's loss, the dataset of the time as
+# demonstrations: 154 shards), on the same scenes, and its falls at N = 8
+FT=$M/p_s_dagger75_aug_mpa_r2_ce1_ft30.zip
+if [ ! -f $FT ]; then
+  bash results/distill_finetune/train.sh 0.5 $M/p_s_dagger75_aug_mpa_r2_ce1.zip runs/distill_finetune_ce75
+  cp runs/distill_finetune_ce75/model.zip $FT
+fi
+.venv/bin/shelf-evaluate --policies $FT --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test "$@"
+.venv/bin/python -m shelf_env.evaluation.falls $FT --ns 8 --runs 10 --seed 0 --out results/distill_test/falls.json
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
   h-d+loop-breaker h-a+loop-breaker $M/p_s_d52sh_aug_mpa.zip $M/p_s_dagger7_aug_mpa.zip $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
-  $M/p_s_dagger19_aug_mpa_r2_ce1.zip $M/p_s_dagger48_aug_mpa_r2_ce1.zip $M/p_s_dagger75_aug_mpa_r2_ce1.zip \
+  $M/p_s_dagger19_aug_mpa_r2_ce1.zip $M/p_s_dagger48_aug_mpa_r2_ce1.zip $M/p_s_dagger75_aug_mpa_r2_ce1.zip $FT \
   --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
 # the held-out scaling curve: falls and SR on the first 10 scenes per N (falls.json), and each model's SR and
 # margin over the better heuristic on every evaluation scene it played (90 per N for the cross-entropy models)
