@@ -141,11 +141,9 @@ def margins(data: list[dict[str, Any]], records: list[EpisodeRecord], heuristics
         row["sr_by_n"] = {}
         if row["policy"] in heuristics:
             continue
-        for policy, n in sorted(index):
-            if policy != row["policy"]:
-                continue
-            scenes = common_scenes(index, [policy, *heuristics], n)
-            paired = margin_over_best(index, policy, n, scenes, heuristics) if scenes else None
+        for n in sorted(n for policy, n in index if policy == row["policy"]):
+            scenes = common_scenes(index, [row["policy"], *heuristics], n)
+            paired = margin_over_best(index, row["policy"], n, scenes, heuristics)  # None without a common scene
             if paired is not None:
                 row["sr_by_n"][n] = {"sr": paired["sr"], "best_heuristic": paired["best"],
                                      "margin": paired["margin"], "scenes": len(scenes)}
