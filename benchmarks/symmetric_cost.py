@@ -1,0 +1,75 @@
+"""What averaging a P+S's Q-maps over the cabinet's 12 symmetries costs per decision, beside the plain model.
+
+    python benchmarks/symmetric_cost.py [MODEL.zip] [--ns 5 8 11] [--decisions 20] [--threads 1]
+
+For each N it takes the first observation of ``--decisions`` YCB scenes (evaluation seed 0's scenes) and
+times the model's masked greedy ``predict`` and `research.symmetric_q.SymmetricQ`'s on the same observations
+(each after one warm-up call), and prints both per decision, their ratio, and an env action's cost beside them
+(one step from each first observation), so the share a decision adds to an episode shows.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from research.symmetric_q import SymmetricQ  # noqa: E402
+from sb3_pixeldqn import PixelDoubleDQN  # noqa: E402
+from shelf_env.evaluation.protocol import scene_seed  # noqa: E402
+from shelf_env.policies import checkpoint_pixel_size  # noqa: E402
+
+
+def timed(call, items) -> float:
+    """Mean seconds of ``call(item)`` over ``items`` after one warm-up call."""
+    call(items[0])
+    start = time.perf_counter()
+    for item in items:
+        call(item)
+    return (time.perf_counter() - start) / len(items)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("model", nargs="?", default="examples/pretrained/p_s.zip", help="a PixelDoubleDQN zip")
+    p.add_argument("--ns", type=int, nargs="+", default=[5, 8, 11], help="numbers of objects")
+    p.add_argument("--decisions", type=int, default=20, help="observations (scenes) per N")
+    p.add_argument("--threads", type=int, default=1, help="torch threads")
+    args = p.parse_args()
+    torch.set_num_threads(args.threads)
+    model = PixelDoubleDQN.load(args.model, device="cpu")
+    pixel = checkpoint_pixel_size(args.model)
+    print(f"{args.model}: {args.decisions} decisions per N, {args.threads} torch thread(s)")
+    for n in args.ns:
+        env = gym.make("ShelfSort-v0", num_objects=n, object_set="ycb", pixel_size=pixel)
+        try:
+            states = []
+            for run in range(args.decisions):
+                obs, _ = env.reset(seed=scene_seed(0, n, run))
+                states.append((obs, env.unwrapped.action_masks()))
+            sym = SymmetricQ.for_env(model, env)
+            plain_s = timed(lambda s: model.predict(s[0], deterministic=True, action_masks=s[1]), states)
+            sym_s = timed(lambda s, sym=sym: sym.predict(s[0], action_masks=s[1]), states)
+            steps = []
+            for run, (obs, masks) in enumerate(states[:5]):
+                env.reset(seed=scene_seed(0, n, run))
+                action = int(model.predict(obs, deterministic=True, action_masks=masks)[0])
+                start = time.perf_counter()
+                env.step(action)
+                steps.append(time.perf_counter() - start)
+            step_s = sum(steps) / len(steps)
+        finally:
+            env.close()
+        print(f"N = {n:2d}: plain {plain_s * 1e3:6.1f} ms, symmetric ({sym.n_views} views) {sym_s * 1e3:6.1f} ms per "
+              f"decision, {sym_s / plain_s:4.1f}x; one env action {step_s * 1e3:6.0f} ms "
+              f"(symmetric decision + action {(sym_s + step_s) / (plain_s + step_s):4.2f}x plain)", flush=True)
+
+
+if __name__ == "__main__":
+    main()
