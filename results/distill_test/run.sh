@@ -71,17 +71,29 @@ if [ ! -f $FT ]; then
 fi
 .venv/bin/shelf-evaluate --policies $FT --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test "$@"
 .venv/bin/python -m shelf_env.evaluation.falls $FT --ns 8 --runs 10 --seed 0 --out results/distill_test/falls.json
+# the seventh session: the same recipe at 55 + 50 + 65 shards (the fifth point), and it fine-tuned for 45 min
+[ -f $M/p_s_dagger115_aug_mpa_r2_ce1.zip ] || bash results/distill_scaling/run.sh
+FT2=$M/p_s_dagger115_aug_mpa_r2_ce1_ft45.zip
+if [ ! -f $FT2 ]; then
+  bash results/distill_finetune/train.sh 0.75 $M/p_s_dagger115_aug_mpa_r2_ce1.zip runs/distill_finetune_ce115
+  cp runs/distill_finetune_ce115/model.zip $FT2
+fi
+for m in $M/p_s_dagger115_aug_mpa_r2_ce1.zip $FT2; do
+  .venv/bin/shelf-evaluate --policies $m --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test "$@"
+  .venv/bin/python -m shelf_env.evaluation.falls $m --ns 8 --runs 10 --seed 0 --out results/distill_test/falls.json
+done
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
   h-d+loop-breaker h-a+loop-breaker $M/p_s_d52sh_aug_mpa.zip $M/p_s_dagger7_aug_mpa.zip $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
   $M/p_s_dagger19_aug_mpa_r2_ce1.zip $M/p_s_dagger48_aug_mpa_r2_ce1.zip $M/p_s_dagger75_aug_mpa_r2_ce1.zip $FT \
+  $M/p_s_dagger115_aug_mpa_r2_ce1.zip $FT2 \
   --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
 # the held-out scaling curve: falls and SR on the first 10 scenes per N (falls.json), and each model's SR and
 # margin over the better heuristic on every evaluation scene it played (90 per N for the cross-entropy models)
 .venv/bin/python research/scaling_curve.py results/distill_test --reports results/distill_scaling \
   --evaluation results/distill_test --out results/distill_test/scaling.md --png results/distill_test/scaling.png
 for m in p_s_d52sh_aug_mpa p_s_dagger7_aug_mpa p_s_dagger7_aug_mpa_r2_ce1 p_s_dagger19_aug_mpa_r2_ce1 \
-    p_s_dagger48_aug_mpa_r2_ce1 p_s_dagger75_aug_mpa_r2_ce1; do
+    p_s_dagger48_aug_mpa_r2_ce1 p_s_dagger75_aug_mpa_r2_ce1 p_s_dagger115_aug_mpa_r2_ce1; do
   .venv/bin/python -m shelf_env.evaluation.report results/distill_test --learned $m --pick-only s --heuristics h-d h-a \
     --out results/distill_test/report_$m.md
 done
