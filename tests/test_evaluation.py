@@ -197,6 +197,18 @@ def test_a_label_stands_for_one_checkpoint_file(tmp_path, capsys):
     with pytest.raises(ValueError, match="another 's' checkpoint"):
         ev.cached_cell(out, str(other), 1, 0, 1, "train")
     assert len(list((out / "cells").glob("*.json"))) == 1  # nothing written for the refused file
+    # a fresh clone holds the committed cells, not the checkpoint: --summarize-only summarizes them, says so,
+    # and a run that would play episodes still refuses the missing file
+    moved = tmp_path / "elsewhere.zip"
+    first.rename(moved)
+    capsys.readouterr()
+    assert evaluate_cli.main(["--policies", str(first), "h-d", *grid, "--summarize-only"]) == 0
+    printed = capsys.readouterr().out
+    assert "1 checkpoint(s) not on this machine" in printed and str(first) in printed
+    summary = json.loads((out / "results.json").read_text())["summary"]
+    assert [row["policy"] for row in summary] == ["s"] and summary[0]["runs"] == 1  # h-d has no cell: not summarized
+    assert evaluate_cli.main(["--policies", str(first), *grid]) == 2
+    assert "nor an existing checkpoint file" in capsys.readouterr().err
 
 
 def test_reuse_cells_copies_the_same_episodes_from_another_folder(tmp_path, capsys):

@@ -102,7 +102,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--out", type=pathlib.Path, required=True,
                    help="the evaluation folder: cells/, results.csv, results.json, plots; resumed when it has cells")
     p.add_argument("--workers", type=int, default=2, help="cells evaluated at once (one process or Ray task each)")
-    p.add_argument("--summarize-only", action="store_true", help="only aggregate the cells already on disk")
+    p.add_argument("--summarize-only", action="store_true",
+                   help="only aggregate the cells already on disk (a checkpoint need not be on this machine: its "
+                        "cells are summarized, their file digest unchecked)")
     p.add_argument("--reuse-cells", type=pathlib.Path, default=None, metavar="FOLDER",
                    help="copy this grid's cells from another evaluation folder made under the same conditions "
                         "(and, for checkpoints, from the same file) instead of running them again")
@@ -251,8 +253,13 @@ def check_out_conditions(out: pathlib.Path, conditions: dict) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    # --summarize-only reads cells, not checkpoints: a checkpoint not on this machine (a fresh clone holds the
+    # committed cells, not the runs/ that made them) is summarized from its cells, its fingerprint unchecked
+    absent = [p for p in args.policies if args.summarize_only and not ev.is_named(p)
+              and not pathlib.Path(ev.policy_file(p)).is_file()]
+    present = [p for p in args.policies if p not in absent]
     try:  # every bad input is reported before any episode runs, in one line
-        for policy in args.policies:
+        for policy in present:
             ev.check_policy(policy)
         ns = ev.check_ns(args.ns)
         if args.runs < 1 or args.seeds < 1 or args.workers < 1:
@@ -275,8 +282,8 @@ def main(argv: list[str] | None = None) -> int:
              **({"safe_picks": True} if args.safe_picks else {}),
              **({"physics": args.physics} if args.physics is not None else {})})
         check_out_conditions(args.out, conditions)
-        ev.check_cell_owner(args.out, args.policies)
-        if args.reuse_cells is not None:
+        ev.check_cell_owner(args.out, present)
+        if args.reuse_cells is not None and not args.summarize_only:
             check_reuse(args.reuse_cells, args.policies, conditions)
     except ValueError as err:
         print(f"shelf-evaluate: error: {err}", file=sys.stderr)
@@ -288,6 +295,9 @@ def main(argv: list[str] | None = None) -> int:
     paths = {job: ev.cell_path(args.out, job[0], job[3], job[1], job[2], args.runs) for job in jobs}
     todo = [job for job in jobs if not paths[job].exists()]
     print(f"{len(jobs)} cells, {len(jobs) - len(todo)} already on disk, {len(todo)} to run", flush=True)
+    if absent:
+        print(f"note: {len(absent)} checkpoint(s) not on this machine, summarized from their cells (file digests "
+              f"unchecked): {', '.join(absent)}", flush=True)
     if todo and not args.summarize_only:
         if conditions and not (args.out / "conditions.json").exists():
             write_json_atomically(args.out / "conditions.json", conditions)
