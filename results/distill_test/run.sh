@@ -71,27 +71,39 @@ if [ ! -f $FT ]; then
 fi
 .venv/bin/shelf-evaluate --policies $FT --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test "$@"
 .venv/bin/python -m shelf_env.evaluation.falls $FT --ns 8 --runs 10 --seed 0 --out results/distill_test/falls.json
-# the seventh session: the same recipe at 55 + 50 + 65 shards (the fifth point), and it fine-tuned for 45 min
+# the seventh session: the same recipe at 55 + 50 + 65 shards (the fifth point), and it fine-tuned as the fourth was
+# (train.sh with a 45-min budget, which ends at the p_s preset's 5,000-step stage cap: 24.3 min on an idle core),
+# each also under the loop breaker
 [ -f $M/p_s_dagger115_aug_mpa_r2_ce1.zip ] || bash results/distill_scaling/run.sh
-FT2=$M/p_s_dagger115_aug_mpa_r2_ce1_ft45.zip
+FT2=$M/p_s_dagger115_aug_mpa_r2_ce1_ft5k.zip
 if [ ! -f $FT2 ]; then
   bash results/distill_finetune/train.sh 0.75 $M/p_s_dagger115_aug_mpa_r2_ce1.zip runs/distill_finetune_ce115
   cp runs/distill_finetune_ce115/model.zip $FT2
 fi
 for m in $M/p_s_dagger115_aug_mpa_r2_ce1.zip $FT2; do
-  .venv/bin/shelf-evaluate --policies $m --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test "$@"
+  .venv/bin/shelf-evaluate --policies $m $m+loop-breaker --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
+    --out results/distill_test "$@"
   .venv/bin/python -m shelf_env.evaluation.falls $m --ns 8 --runs 10 --seed 0 --out results/distill_test/falls.json
 done
+.venv/bin/python -m shelf_env.evaluation.falls $M/p_s_dagger115_aug_mpa_r2_ce1.zip+loop-breaker --ns 8 --runs 10 --seed 0 \
+  --out results/distill_test/falls.json
+# ... and the same loop breaker on the heuristics and the shipped P+S over the same three seeds (like with like)
+.venv/bin/shelf-evaluate --policies h-d+loop-breaker h-a+loop-breaker "$ps+loop-breaker" --ns 5,8,11 --runs 30 --seeds 3 \
+  --object-sets ycb --out results/distill_test "$@"
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
   h-d+loop-breaker h-a+loop-breaker $M/p_s_d52sh_aug_mpa.zip $M/p_s_dagger7_aug_mpa.zip $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
   $M/p_s_dagger19_aug_mpa_r2_ce1.zip $M/p_s_dagger48_aug_mpa_r2_ce1.zip $M/p_s_dagger75_aug_mpa_r2_ce1.zip $FT \
-  $M/p_s_dagger115_aug_mpa_r2_ce1.zip $FT2 \
+  $M/p_s_dagger115_aug_mpa_r2_ce1.zip $FT2 $M/p_s_dagger115_aug_mpa_r2_ce1.zip+loop-breaker $FT2+loop-breaker \
   --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
 # the held-out scaling curve: falls and SR on the first 10 scenes per N (falls.json), and each model's SR and
 # margin over the better heuristic on every evaluation scene it played (90 per N for the cross-entropy models)
 .venv/bin/python research/scaling_curve.py results/distill_test --reports results/distill_scaling \
   --evaluation results/distill_test --out results/distill_test/scaling.md --png results/distill_test/scaling.png
+# ... and every model's margin over the best heuristic variant, bare or under the loop breaker (like with like)
+.venv/bin/python research/scaling_curve.py results/distill_test --reports results/distill_scaling \
+  --evaluation results/distill_test --heuristics h-d h-a h-d+loop-breaker h-a+loop-breaker \
+  --out results/distill_test/scaling_loop_breaker.md
 for m in p_s_d52sh_aug_mpa p_s_dagger7_aug_mpa p_s_dagger7_aug_mpa_r2_ce1 p_s_dagger19_aug_mpa_r2_ce1 \
     p_s_dagger48_aug_mpa_r2_ce1 p_s_dagger75_aug_mpa_r2_ce1 p_s_dagger115_aug_mpa_r2_ce1; do
   .venv/bin/python -m shelf_env.evaluation.report results/distill_test --learned $m --pick-only s --heuristics h-d h-a \
