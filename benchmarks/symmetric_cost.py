@@ -57,8 +57,8 @@ def main() -> None:
             sym = SymmetricQ.for_env(model, env)
             plain_s = timed(lambda s: model.predict(s[0], deterministic=True, action_masks=s[1]), states)
             sym_s = timed(lambda s, sym=sym: sym.predict(s[0], action_masks=s[1]), states)
-            differ = sum(int(model.predict(o, deterministic=True, action_masks=m)[0]) != int(sym.predict(o, m)[0])
-                         for o, m in states)
+            differ = sum(int(model.predict(o, deterministic=True, action_masks=m)[0])
+                         != int(sym.predict(o, action_masks=m)[0]) for o, m in states)
             steps = []
             for run, (obs, masks) in enumerate(states[:5]):
                 env.reset(seed=scene_seed(0, n, run))

@@ -61,7 +61,8 @@ class SymmetricQ:
         self.codec = codec
         self._mirror = MirrorWidth(codec, p=1.0) if mirror else None
         self._permute = PermuteClasses()
-        self.perms = list(itertools.permutations(range(len(CLASS_RGB)))) if permutations else [(0, 1, 2)]
+        identity = tuple(range(len(CLASS_RGB)))
+        self.perms = list(itertools.permutations(identity)) if permutations else [identity]
 
     @classmethod
     def for_env(cls, model: Any, env: gym.Env, **kwargs: Any) -> SymmetricQ:
@@ -81,7 +82,7 @@ class SymmetricQ:
     def q_maps(self, observation: np.ndarray) -> np.ndarray:
         """The mean Q-maps ``(n_maps, H, W)`` of one observation ``(C, H, W)`` over its views."""
         obs = np.asarray(observation)
-        views = [obs if list(p) == [0, 1, 2] else self._permute.observation(obs, p) for p in self.perms]
+        views = [obs if list(p) == sorted(p) else self._permute.observation(obs, p) for p in self.perms]
         if self._mirror is not None:
             views += [self._mirror.observation(v) for v in views]
         q = self.model.policy.q_map_values(np.stack(views)).astype(np.float64)
