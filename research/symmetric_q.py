@@ -26,8 +26,9 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch as th
 
-from sb3_pixeldqn.policies import check_action_masks
+from sb3_pixeldqn.policies import check_action_masks, masked_argmax
 from shelf_env import policies
 from shelf_env.actions import ActionCodec
 from shelf_env.camera.heightmap import CLASS_RGB
@@ -54,11 +55,9 @@ class SymmetricQ:
         self.model = model
         self.action_space = model.action_space
         self.observation_space = model.observation_space
-        n_maps = int(self.action_space.n) // (codec.rows * codec.cols)
-        if n_maps * codec.rows * codec.cols != int(self.action_space.n) or len(codec.map_names) != n_maps:
+        if len(codec.map_names) * codec.rows * codec.cols != int(self.action_space.n):
             raise ValueError(f"{type(model).__name__}'s {self.action_space.n} actions are not the env's "
                              f"{len(codec.map_names)} maps of {codec.rows}x{codec.cols}")
-        self.codec = codec
         self._mirror = MirrorWidth(codec, p=1.0) if mirror else None
         self._permute = PermuteClasses()
         identity = tuple(range(len(CLASS_RGB)))
@@ -82,16 +81,16 @@ class SymmetricQ:
     def q_maps(self, observation: np.ndarray) -> np.ndarray:
         """The mean Q-maps ``(n_maps, H, W)`` of one observation ``(C, H, W)`` over its views."""
         obs = np.asarray(observation)
-        views = [obs if list(p) == sorted(p) else self._permute.observation(obs, p) for p in self.perms]
+        views = [self._permute.observation(obs, p) for p in self.perms]
         if self._mirror is not None:
             views += [self._mirror.observation(v) for v in views]
         q = self.model.policy.q_map_values(np.stack(views)).astype(np.float64)
-        shape = q.shape[1:]
-        n_plain = len(self.perms)
-        if self._mirror is not None:  # a mirrored view's action a is the scene's mirror(a): map it back
-            back = [self._mirror.mask(q[i].reshape(-1)).reshape(shape) for i in range(n_plain, len(q))]
-            q = np.concatenate([q[:n_plain], np.stack(back)])
-        return q.mean(axis=0)
+        plain = q[:len(self.perms)].mean(axis=0)
+        if self._mirror is None:
+            return plain
+        # a mirrored view's action a is the scene's mirror(a): its mean maps back once (the map is linear)
+        mirrored = self._mirror.mask(q[len(self.perms):].mean(axis=0).reshape(-1)).reshape(plain.shape)
+        return (plain + mirrored) / 2
 
     def predict(
         self,
@@ -106,11 +105,9 @@ class SymmetricQ:
         single = obs.ndim == len(self.observation_space.shape)
         batch = obs[None] if single else obs
         n_actions = int(self.action_space.n)
-        masks = None if action_masks is None else check_action_masks(action_masks, n_actions, len(batch))
-        actions = np.empty(len(batch), dtype=np.int64)
-        for i, o in enumerate(batch):
-            q = self.q_maps(o).reshape(-1)
-            actions[i] = int(np.argmax(q if masks is None else np.where(masks[i], q, -np.inf)))
+        masks = None if action_masks is None else th.as_tensor(check_action_masks(action_masks, n_actions, len(batch)))
+        q = th.as_tensor(np.stack([self.q_maps(o).reshape(-1) for o in batch]))
+        actions = masked_argmax(q, masks).numpy()
         return (actions[0] if single else actions), state
 
 
