@@ -148,8 +148,11 @@ def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(
     out = tmp_path / "distilled.zip"
     assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(out), "--epochs", "1",
                              "--val-fraction", "0", "--teacher-radius", "2", "--teacher-weight", "3",
-                             "--progress-radius", "1", "--progress-weight", "2", "--teacher-temperature", "0.5"]) == 0
+                             "--progress-radius", "1", "--progress-weight", "2", "--teacher-temperature", "0.5",
+                             "--seed", "3", "--batch-states", "4"]) == 0
     report = json.loads(out.with_suffix(".distill.json").read_text())
+    # what reproduces it: a replicate at another seed differs from the first only in this field
+    assert report["seed"] == 3 and report["batch_states"] == 4 and report["learning_rate"] is None
     assert report["train_states"] == shard.num_states and report["history"][-1]["train"]["loss"] > 0
     assert report["teacher_radius"] == 2 and report["teacher_weight"] == 3.0 and report["progress_radius"] == 1
     assert report["progress_weight"] == 2.0 and report["teacher_temperature"] == 0.5 and report["margin"] == 1.0

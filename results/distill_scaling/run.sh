@@ -59,6 +59,8 @@ SHARDS=s00:55,s01:48 distil p_s_dagger48_aug_mpa_r2_ce1 all --anchor 1.0 --teach
 SHARDS=s00:55,s01:50,s02:25 distil p_s_dagger75_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
 # ... and at the seventh session's dataset (55 + 50 + 65 shards: 7,351 states, 6,242 of them for training): the fifth point
 SHARDS=s00:55,s01:50,s02:65 distil p_s_dagger115_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
+# ... and at the eighth session's dataset (all 205 shards at its start: 55 + 50 + 100): the sixth point
+SHARDS=s00:55,s01:50,s02:100 distil p_s_dagger150_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
 
 # B + 45 min of PixelDoubleDQN with the dataset as demonstrations (the data/teacher of the time: 37 shards)
 if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then

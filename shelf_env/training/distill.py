@@ -148,6 +148,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "anchor": anchor, "margin": loss.margin, "teacher_radius": loss.teacher_radius,
               "teacher_weight": loss.weights[2], "progress_radius": loss.progress_radius,
               "progress_weight": loss.weights[3], "teacher_temperature": loss.teacher_temperature,
+              "seed": seed, "batch_states": batch_states, "learning_rate": learning_rate,
               "seconds": round(time.monotonic() - start, 1), "history": history}
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
