@@ -434,6 +434,41 @@ class ShelfSortEnv(gym.Env):
         (push; or pick -> place pose from the object the cup holds -> place) -> settle -> the task's
         rules (`shelf_env.world.task`) -> camera."""
         before = self._semantic
+        name, judgement, reward, relabel_reward = self._act(action)
+        truncated = not judgement.terminated and self.action_count >= self.max_actions
+        self._obs = self._observe()
+        info = self._info(name, judgement)
+        if self.drag_watch is not None:
+            info["interventions"] = list(self.primitive_runner.interventions)
+        if judgement.relabel:
+            assert before is not None
+            relabel = self._class_of_uid(judgement.region)
+            info["relabelled"] = {
+                "obs": recolour(*before, relabel, self._regions_mask),
+                "next_obs": recolour(*self._observed_semantic(), relabel, self._regions_mask),
+                "reward": relabel_reward,
+                "terminated": True,
+            }
+        if judgement.terminated or truncated:  # a VecEnv resets before the learner can ask for the final mask
+            info["action_mask"] = self.action_masks()
+        return self._obs.copy(), reward, judgement.terminated, bool(truncated), info
+
+    def step_outcome(self, action) -> dict[str, Any]:
+        """The outcome of `step` without the camera: ``reward``, ``terminated``, ``fell``, ``is_success`` and
+        ``num_sorted`` exactly as `step` returns them (the camera runs after the physics and the task's rules,
+        so it changes none of them), at about two thirds of a step's cost. It leaves the env without an
+        observation of its new state, so only a copy that is thrown away after may call it: a forked probe
+        (`shelf_env.privileged.lookahead.probe_outcome`) that needs the outcome, not the next image."""
+        name, judgement, reward, _ = self._act(action)
+        self._obs = self._semantic = None  # stale: step() and action_masks() now ask for a reset
+        info = self._info(name, judgement)
+        return {"reward": float(reward), "terminated": bool(judgement.terminated), "fell": bool(info["fell"]),
+                "is_success": bool(info["is_success"]), "num_sorted": int(info["num_sorted"])}
+
+    def _act(self, action) -> tuple[str, task.Judgement, float, float]:
+        """The physics and the rules of one step, before the camera: the primitive's name, the task's
+        judgement, the reward and the hindsight reward of a relabelled transition."""
+        before = self._semantic
         if self._obs is None or before is None:
             raise RuntimeError("call reset() before step()")
         name, row, col = self.decode_action(action)
@@ -460,22 +495,7 @@ class ShelfSortEnv(gym.Env):
         for obj, ok in zip(list(self.world.objects), judgement.inside):
             if not ok:  # it left the cabinet: remove it so it cannot roll around forever
                 self.world.remove_object(obj)
-        truncated = not judgement.terminated and self.action_count >= self.max_actions
-        self._obs = self._observe()
-        info = self._info(name, judgement)
-        if self.drag_watch is not None:
-            info["interventions"] = list(self.primitive_runner.interventions)
-        if judgement.relabel:
-            relabel = self._class_of_uid(judgement.region)
-            info["relabelled"] = {
-                "obs": recolour(*before, relabel, self._regions_mask),
-                "next_obs": recolour(*self._observed_semantic(), relabel, self._regions_mask),
-                "reward": relabel_reward,
-                "terminated": True,
-            }
-        if judgement.terminated or truncated:  # a VecEnv resets before the learner can ask for the final mask
-            info["action_mask"] = self.action_masks()
-        return self._obs.copy(), reward, judgement.terminated, bool(truncated), info
+        return name, judgement, reward, relabel_reward
 
     def _region_of_uid(self, judgement: task.Judgement) -> dict[int, int]:
         """Region index (-1: none) of each object, by uid, when every object is inside."""

@@ -21,6 +21,7 @@ from shelf_env.privileged.lookahead import (
     LookaheadDistance,
     LookaheadHeuristic,
     Outcome,
+    probe_outcome,
     probe_step,
 )
 from shelf_env.world.cabinet import Region
@@ -59,6 +60,32 @@ def test_probe_reports_exactly_what_the_step_does_and_leaves_the_env_untouched()
                 sha(obs), reward, terminated, info["fell"], info["is_success"])
             if terminated:
                 break
+    finally:
+        env.close()
+
+
+def test_probe_outcome_is_probe_step_without_the_image():
+    env = gym.make("ShelfSort-v0", num_objects=6, object_set="train", pixel_size=0.01).unwrapped
+    try:
+        obs, _ = env.reset(seed=11)
+        allowed = np.flatnonzero(env.action_masks())
+        actions = [int(a) for a in np.random.default_rng(0).choice(allowed, size=6, replace=False)]
+        outcomes = [(probe_step(env, a), probe_outcome(env, a)) for a in actions]
+        for full, blind in outcomes:
+            assert (blind.reward, blind.terminated, blind.fell, blind.is_success, blind.num_sorted) == (
+                full.reward, full.terminated, full.fell, full.is_success, full.num_sorted)
+            assert blind.obs_sha256 == "" and blind.next_obs is None and full.num_sorted is not None
+        assert len({o.valid for _, o in outcomes}) == 2 or len({o.num_sorted for _, o in outcomes}) > 1  # not all alike
+        assert sha(env.observation) == sha(obs)  # the env is untouched
+        # ... and its outcome is the real step's
+        _, reward, terminated, _, info = env.step(actions[0])
+        assert (outcomes[0][1].reward, outcomes[0][1].terminated, outcomes[0][1].fell) == (
+            reward, terminated, info["fell"])
+        # step_outcome leaves an env without an observation: only a thrown-away copy may call it
+        env.reset(seed=11)
+        assert env.step_outcome(actions[1])["num_sorted"] == outcomes[1][1].num_sorted
+        with pytest.raises(RuntimeError, match="reset"):
+            env.step(actions[1])
     finally:
         env.close()
 

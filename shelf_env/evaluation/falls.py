@@ -3,7 +3,7 @@
 A policy's SR says how often an episode ends well; a learner needs finer numbers: how often its
 greedy action drops an object, per action. Measured here on the policy's own states: it plays
 greedily (masked argmax, as `shelf-evaluate` acts), and before each of its actions that action is
-tried in a forked copy of the simulator (`shelf_env.privileged.lookahead.probe_step`). An action that
+tried in a forked copy of the simulator (`shelf_env.privileged.lookahead.probe_outcome`). An action that
 would end the episode invalid (an object falls out, or the scene does not come to rest) is counted
 and replaced by the privileged one-step lookahead's choice (``h-d-lookahead``, the *rescue*), so the
 episode goes on and every state the policy reaches is measured, not only those before its first fall.
@@ -46,7 +46,7 @@ from shelf_env.evaluation.protocol import (
 )
 from shelf_env.files import write_json_atomically
 from shelf_env.policies import POLICIES
-from shelf_env.privileged.lookahead import probe_step
+from shelf_env.privileged.lookahead import probe_outcome
 
 #: Evaluation seed of the scenes distilled models are compared on (the scaling curve, the choice of a
 #: model to ship): a validation set. Final claims use the §V seeds 0..S-1, which no choice reads.
@@ -78,7 +78,7 @@ def measure_episode(env: Any, policy: Any, rescue: Any, reset_seed: int, run: in
     first_invalid = -1
     while True:
         action = greedy_action(env, policy, obs, decisions == 0, masked, starts)
-        outcome = probe_step(env, action)
+        outcome = probe_outcome(env, action)
         if not outcome.valid:
             invalid += 1
             fell += int(outcome.fell)

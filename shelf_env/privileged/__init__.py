@@ -1,7 +1,13 @@
 """Privileged teachers that read the simulator through forked copies (a robot cannot): the lookahead
-(`lookahead`: `probe_step`, ``h-d-lookahead``) and the teacher dataset built with it (`dataset`).
+(`lookahead`: `probe_step`, `probe_outcome`, ``h-d-lookahead``) and the teacher dataset built with it (`dataset`).
 Training and diagnostics only; never a baseline."""
 
-from shelf_env.privileged.lookahead import LookaheadAccessibility, LookaheadDistance, Outcome, probe_step
+from shelf_env.privileged.lookahead import (
+    LookaheadAccessibility,
+    LookaheadDistance,
+    Outcome,
+    probe_outcome,
+    probe_step,
+)
 
-__all__ = ["LookaheadAccessibility", "LookaheadDistance", "Outcome", "probe_step"]
+__all__ = ["LookaheadAccessibility", "LookaheadDistance", "Outcome", "probe_outcome", "probe_step"]

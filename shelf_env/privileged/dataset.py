@@ -3,7 +3,8 @@
 A camera-only policy has to learn which actions drop an object and which make progress; the
 episodes' own terminal rewards teach that too slowly (one fall per episode). Here every visited
 state carries many labels, each the exact outcome of one masked action tried in a forked copy of
-the simulator (`shelf_env.privileged.lookahead.probe_step`): did an object fall, did the scene stay valid,
+the simulator (`shelf_env.privileged.lookahead.probe_step`, or `probe_outcome` where the next image is not needed: the
+same outcome without the copy's camera, a third cheaper): did an object fall, did the scene stay valid,
 how did the number of sorted objects change, did the step sort the scene. The labelled actions,
 without repeats (at most ``max_probes``; past that only the teacher's and the greedy action): the
 teacher's own probes (its chosen action among them), the driving model's greedy masked action, one
@@ -67,7 +68,7 @@ from shelf_env.env import DYNAMICS_VERSION
 from shelf_env.evaluation.protocol import policy_digest
 from shelf_env.files import write_atomically
 from shelf_env.policies import POLICIES, masked_greedy
-from shelf_env.privileged.lookahead import LookaheadHeuristic, Outcome, probe_step
+from shelf_env.privileged.lookahead import LookaheadHeuristic, Outcome, probe_outcome
 from shelf_env.processes import exit_with_parent
 
 #: Version of the shard layout below; a shard of another is refused.
@@ -160,9 +161,9 @@ def collect_episode(env: gym.Env, model: Any, seed: int, rng: np.random.Generato
                 if source == SOURCES.index("greedy"):  # the greedy label keeps its own source
                     outcomes[action] = (outcomes[action][0], source)
                 continue
-            outcomes[action] = (probe_step(env, action), source)
+            outcomes[action] = (probe_outcome(env, action), source)
         if choice not in outcomes:
-            outcomes[choice] = (probe_step(env, choice), SOURCES.index("teacher"))
+            outcomes[choice] = (probe_outcome(env, choice), SOURCES.index("teacher"))
         t = len(episode.obs)
         episode.obs.append(np.asarray(obs, dtype=np.uint8))
         for action, (outcome, source) in outcomes.items():

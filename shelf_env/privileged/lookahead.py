@@ -143,6 +143,15 @@ def probe_step(env: gym.Env, action: int) -> Outcome:
     return Outcome(**in_fork(env, step, f"stepping action {action}"))
 
 
+def probe_outcome(env: gym.Env, action: int) -> Outcome:
+    """`probe_step` without the next observation (`ShelfSortEnv.step_outcome`: the copy skips the camera):
+    the same reward, flags and sorted count, ``obs_sha256`` empty and ``next_obs`` None. For labels that need
+    the outcome alone (the teacher dataset's probes), at about two thirds of `probe_step`'s cost
+    (``benchmarks/probe_cost.py``)."""
+    report = in_fork(env, lambda base: base.step_outcome(int(action)), f"stepping action {action}")
+    return Outcome(obs_sha256="", **report)
+
+
 class LookaheadHeuristic(PickHeuristic):
     """A pick heuristic (``base``: H-a or H-d) that vetoes picks the simulator says end the episode
     invalid (see the module docstring); with ``pushes`` (and the env's push primitive) a step where
