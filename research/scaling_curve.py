@@ -8,7 +8,9 @@ and fallen actions per greedy action at each N; SR at each N; reference policies
 The fall measurement plays 10 scenes per N, too few for SR: with ``--evaluation FOLDER`` (a ``shelf-evaluate``
 folder of the same models, e.g. the §V scenes of three seeds) it adds a second table and a third panel, each
 model's SR per N over every scene of that folder it played and its margin over the best of ``--heuristics``
-on exactly those scenes (`margins`), averaged over the N.
+on exactly those scenes (`margins`), averaged over the N; a distilled model that folder played but the fall
+measurement did not (a replicate distilled again at another seed) is a row of that table only. The trend line
+under it gives the slope's standard error and how far apart models distilled from the same states land.
 
     python research/scaling_curve.py results/distill_scaling --out results/distill_scaling/report.md \\
         --png results/distill_scaling/scaling.png
@@ -104,7 +106,22 @@ def rows(reports: dict[str, dict[str, Any]], cells: list[dict[str, Any]]) -> lis
                                                r["wrapped"]))
 
 
+def add_evaluated(data: list[dict[str, Any]], reports: dict[str, dict[str, Any]],
+                  records: list[EpisodeRecord]) -> list[dict[str, Any]]:
+    """``data`` with a row (no fall cells) for every distilled model that ``records`` (an evaluation) played but the
+    fall measurement did not, such as a replicate distilled again at another seed; in `rows`' order."""
+    known = {r["policy"] for r in data}
+    for label in sorted({r.policy for r in records} - known):
+        if label in reports:
+            report = reports[label]
+            data.append({"policy": label, "states": report["train_states"],
+                         "val_loss": report["history"][-1]["val"]["loss"], "recipe": recipe(report),
+                         "wrapped": False, "zip": True, "by_n": {}})
+    return sorted(data, key=lambda r: (r["states"] is None, r["recipe"] or "", r["states"] or 0, r["wrapped"]))
+
+
 def table(data: list[dict[str, Any]]) -> str:
+    data = [r for r in data if r["by_n"]]  # the rows with fall cells
     ns = sorted({n for r in data for n in r["by_n"]})
     head = ["policy", "states distilled", "recipe", "val loss"] + \
         [f"invalid / fell per action (episodes with one), N = {n}" for n in ns] + [f"SR N = {n}" for n in ns]
@@ -187,13 +204,23 @@ def trend(data: list[dict[str, Any]], targets: tuple[float, ...] = (0.0, 15.0)) 
         x = [math.log2(r["states"]) for r in pts]
         y = [r["mean_margin"] for r in pts]
         mx, my = sum(x) / len(x), sum(y) / len(y)
-        slope = sum((a - mx) * (b - my) for a, b in zip(x, y)) / sum((a - mx) ** 2 for a in x)
+        sxx = sum((a - mx) ** 2 for a in x)
+        slope = sum((a - mx) * (b - my) for a, b in zip(x, y)) / sxx
+        residual = sum((b - my - slope * (a - mx)) ** 2 for a, b in zip(x, y))
         line = (f"- {name}: {len(pts)} models ({', '.join(str(r['states']) for r in pts)} states), margin averaged "
                 f"over N = {', '.join(map(str, sorted(pts[0]['sr_by_n'])))}: {slope:+.1f} points per doubling of the "
-                f"training states (least squares in log2 of the states)")
+                f"training states (least squares in log2 of the states; standard error "
+                f"{math.sqrt(residual / (len(pts) - 2) / sxx):.1f})")
         if slope > 0:
             reach = [f"{t:+g} at ~{2 ** (mx + (t - my) / slope):,.0f} states" for t in targets]
             line += "; extrapolated, the line reaches " + ", ".join(reach)
+        twins: dict[int, list[float]] = {}
+        for r in pts:
+            twins.setdefault(r["states"], []).append(r["mean_margin"])
+        repeated = {k: v for k, v in twins.items() if len(v) > 1}
+        if repeated:  # the same data distilled again (another seed): how far apart one point's models land
+            line += "; models distilled from the same states: " + "; ".join(
+                f"{k}: {', '.join(f'{m:+.1f}' for m in v)}" for k, v in sorted(repeated.items()))
         lines.append(line + ".")
     return lines
 
@@ -274,10 +301,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--heuristics", nargs="+", default=["h-d", "h-a"], help="the policies the margin is taken "
                    "over (default: h-d h-a)")
     args = p.parse_args(argv)
-    data = rows(*load(args.folder, args.reports))
+    reports, cells = load(args.folder, args.reports)
+    data = rows(reports, cells)
     text = table(data)
     if args.evaluation is not None:
-        margins(data, load_cells(args.evaluation), args.heuristics)
+        records = load_cells(args.evaluation)
+        data = add_evaluated(data, reports, records)
+        margins(data, records, args.heuristics)
         text += "\n" + margin_table(data, args.heuristics)
         fits = trend(data)
         if fits:

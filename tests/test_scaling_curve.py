@@ -104,6 +104,14 @@ def test_the_margin_is_taken_over_the_better_heuristic_on_each_models_own_scenes
     out = tmp_path / "curve.md"
     assert scaling_curve.main([str(tmp_path), "--evaluation", str(tmp_path), "--out", str(out), "--png", str(png)]) == 0
     assert "SR N = 8 (margin over best of h-d / h-a; scenes)" in out.read_text()
+    # a replicate the evaluation played but the fall measurement did not: a row of the margin table only
+    (tmp_path / "p_s_d100_seed1.distill.json").write_text(json.dumps(
+        {"init": start, "train_states": 100, "seed": 1, "history": [{"epoch": 0, "val": {"loss": 8.0}}]}))
+    (cells / "p_s_d100_seed1__ycb__N08.json").write_text(json.dumps(episodes("p_s_d100_seed1", 8, [0], {(0, 0)})))
+    assert scaling_curve.main([str(tmp_path), "--evaluation", str(tmp_path), "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "| p_s_d100_seed1 | 100 | 25.0 % (-75.0; 4) | -75.0 |" in text
+    assert "| p_s_d100_seed1 | 100 | as stored" not in text  # not in the fall table
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(ValueError, match="no episode of the heuristic 'h-x'"):
         scaling_curve.margins(data, load_cells(tmp_path), ["h-d", "h-x"])
@@ -122,6 +130,13 @@ def test_the_trend_fits_the_margin_against_doublings_of_the_data() -> None:
     (line,) = scaling_curve.trend(rising)
     assert "r: 3 models (1000, 2000, 4000 states)" in line and "N = 5, 8" in line
     assert "+5.0 points per doubling" in line and "+0 at ~16,000 states, +15 at ~128,000 states" in line
+    assert "standard error 0.0" in line and "same states" not in line
+    # a replicate (the same states distilled again at another seed) is one more point, and its spread is shown
+    (line,) = scaling_curve.trend(rising + [row(4000, -14.0) | {"policy": "m4000_seed1"}])
+    assert "4 models (1000, 2000, 4000, 4000 states)" in line and "4000: -10.0, -14.0" in line
+    # x = log2(states / 1000) = 0, 1, 2, 2; y = -20, -15, -10, -14: slope Sxy / Sxx = 10.75 / 2.75, and the
+    # residuals' standard error sqrt(SSR / (4 - 2) / Sxx)
+    assert "+3.9 points per doubling" in line and "standard error 1.3" in line
     falling = [row(1000, -10.0, "f"), row(2000, -12.0, "f"), row(4000, -14.0, "f")]
     (line,) = scaling_curve.trend(falling)
     assert "-2.0 points per doubling" in line and "reaches" not in line
