@@ -74,9 +74,17 @@ def recipe(report: dict[str, Any]) -> str:
         parts.append(f"teacher cross-entropy at {report['teacher_temperature']:g}")
     if report.get("epochs", EPOCHS) != EPOCHS:
         parts.append(f"{report['epochs']} epochs")
+    if report.get("average_last", 1) > 1:
+        parts.append(f"weights averaged over the last {report['average_last']} epochs")
     if {name[:3] for name in report.get("shards", [])} - {"s00"}:
         parts.append("+ DAgger series")
     return ", ".join(parts)
+
+
+def final_val_loss(report: dict[str, Any]) -> float:
+    """The validation loss of the model a distillation saved: its weights' average where it averaged, else the
+    last epoch's."""
+    return (report.get("averaged") or {}).get("val", report["history"][-1]["val"])["loss"]
 
 
 def rows(reports: dict[str, dict[str, Any]], cells: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -95,7 +103,7 @@ def rows(reports: dict[str, dict[str, Any]], cells: list[dict[str, Any]]) -> lis
                                       "zip": name.endswith(".zip"), "by_n": {}})
         if stem in reports:
             row["states"] = reports[stem]["train_states"]
-            row["val_loss"] = reports[stem]["history"][-1]["val"]["loss"]
+            row["val_loss"] = final_val_loss(reports[stem])
             row["recipe"] = recipe(reports[stem])
         elif name in starts:
             row["states"] = 0
@@ -115,7 +123,7 @@ def add_evaluated(data: list[dict[str, Any]], reports: dict[str, dict[str, Any]]
         if label in reports:
             report = reports[label]
             data.append({"policy": label, "states": report["train_states"],
-                         "val_loss": report["history"][-1]["val"]["loss"], "recipe": recipe(report),
+                         "val_loss": final_val_loss(report), "recipe": recipe(report),
                          "wrapped": False, "zip": True, "by_n": {}})
     return sorted(data, key=lambda r: (r["states"] is None, r["recipe"] or "", r["states"] or 0, r["wrapped"]))
 

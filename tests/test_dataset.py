@@ -170,6 +170,33 @@ def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(
     assert not (tmp_path / "x.zip").exists()
 
 
+def test_average_last_saves_the_mean_of_the_last_epochs_weights(one_shard: pathlib.Path, tmp_path: pathlib.Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    import torch
+
+    from sb3_pixeldqn import PixelDoubleDQN
+    from shelf_env.training import distill as distill_cli
+
+    def distil(name: str, *extra: str) -> dict[str, torch.Tensor]:
+        out = tmp_path / f"{name}.zip"
+        assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(out), "--val-fraction", "0",
+                                 "--batch-states", "2", *extra]) == 0
+        return PixelDoubleDQN.load(out, device="cpu").q_net.state_dict()
+
+    first = distil("one", "--epochs", "1")  # epoch 1 alone (each epoch's batch order comes from seed + epoch)
+    second = distil("two", "--epochs", "2")  # the same epoch 1, then epoch 2
+    mean = distil("mean", "--epochs", "2", "--average-last", "2")
+    assert any(not torch.equal(first[k], second[k]) for k in first)  # the epochs moved the weights
+    for k in mean:
+        torch.testing.assert_close(mean[k], (first[k] + second[k]) / 2, rtol=1e-5, atol=1e-6)
+    report = json.loads((tmp_path / "mean.distill.json").read_text())
+    assert report["average_last"] == 2 and report["averaged"] == {"epochs": 2}  # no validation states here
+    assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(tmp_path / "x.zip"),
+                             "--epochs", "2", "--average-last", "3"]) == 2
+    assert "average_last must be between 1 and the epochs (2), got 3" in capsys.readouterr().err
+    assert not (tmp_path / "x.zip").exists()
+
+
 def test_shards_become_exact_transitions_for_the_demonstration_store(one_shard: pathlib.Path) -> None:
     from shelf_env.training import config as cfg
 

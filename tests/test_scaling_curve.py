@@ -64,6 +64,11 @@ def test_the_recipe_names_every_option_that_differs_from_the_defaults() -> None:
     assert scaling_curve.recipe(report | {"teacher_radius": 0, "teacher_weight": 1.0, "epochs": 24,
                                           "shards": ["s00_00000.npz", "s01_00000.npz"]}) == \
         "augmented, teacher over allowed actions, progress, anchor 1, 24 epochs, + DAgger series"
+    averaged = report | {"teacher_radius": 0, "teacher_weight": 1.0, "average_last": 4,
+                         "averaged": {"epochs": 4, "val": {"loss": 2.5}}, "history": [{"val": {"loss": 3.0}}]}
+    assert scaling_curve.recipe(averaged).endswith("anchor 1, weights averaged over the last 4 epochs")
+    assert scaling_curve.final_val_loss(averaged) == 2.5  # the saved model's, not the last epoch's
+    assert scaling_curve.final_val_loss(averaged | {"averaged": None}) == 3.0
     assert scaling_curve.recipe(report | {"shards": ["s00_00000.npz", "s01_00000.npz"]}) == \
         scaling_curve.recipe(report | {"shards": ["s00_00000.npz", "s01_00000.npz", "s02_00000.npz"]})
 

@@ -33,6 +33,7 @@ import time
 from typing import Any
 
 import numpy as np
+import torch
 
 from sb3_pixeldqn.distill import DEFAULT_WEIGHTS, LabelledStates, LossOptions, distill, evaluate
 from shelf_env.files import write_json_atomically
@@ -89,21 +90,37 @@ def select_shards(shards: list[dataset.Shard], spec: int | str | None) -> list[d
     return sorted(out, key=lambda s: s.path.name)
 
 
+def add_weights(summed: dict[str, Any] | None, state: dict[str, Any]) -> dict[str, Any]:
+    """``summed`` plus a copy of the network weights ``state`` (a state dict), in float64; a new sum when None."""
+    fresh = {k: v.detach().to(dtype=torch.float64, copy=True) for k, v in state.items()}
+    return fresh if summed is None else {k: summed[k] + fresh[k] for k in summed}
+
+
+def mean_weights(summed: dict[str, Any], count: int) -> dict[str, Any]:
+    """The state dict of ``count`` summed weights' mean (`add_weights`), in float32 as the networks hold them."""
+    return {k: (v / count).to(torch.float32) for k, v in summed.items()}
+
+
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
         max_states: int | None = None, batch_states: int = 16, loss: LossOptions = LossOptions(),
         learning_rate: float | None = None, seed: int = 0, max_shards: int | str | None = None,
-        augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0) -> dict[str, Any]:
+        augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0,
+        average_last: int = 1) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
     draw each batch's states through the model's own augmentation (its exact symmetries), as its training did.
     ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions).
     ``progress``: the progress term ranks a state's valid actions by the objects they sorted. ``anchor``:
     the weight that keeps unlabelled allowed actions at the starting model's values (0: none). ``loss``: the
     loss's margin, weights, radii and temperature in training (`LossOptions`); the validation loss keeps the
-    default weights, so that recipes compare."""
+    default weights, so that recipes compare. ``average_last`` > 1: the saved model's weights are the mean of its
+    weights at the end of each of the last that many epochs (one model from a stretch of training rather than the
+    last step's draw; the report's ``averaged`` holds its validation); 1: the last epoch's."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     if epochs < 1 or not 0 <= val_fraction < 1:
         raise ValueError(f"need epochs >= 1 and val_fraction in [0, 1), got {epochs} and {val_fraction}")
+    if not 1 <= average_last <= epochs:
+        raise ValueError(f"average_last must be between 1 and the epochs ({epochs}), got {average_last}")
     val_loss = dataclasses.replace(loss, weights=DEFAULT_WEIGHTS)
     if not pathlib.Path(init).is_file():
         raise ValueError(f"--init {init!r} does not exist")
@@ -129,6 +146,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     anchor_net = copy.deepcopy(model.q_net).requires_grad_(False) if anchor > 0 else None
     start = time.monotonic()
     history: list[dict[str, Any]] = []
+    summed: dict[str, Any] | None = None
     if val is not None:  # the starting model, for comparison
         history.append({"epoch": 0, "val": evaluate(model.policy, val, val_loss)})
         print(json.dumps(history[-1]), flush=True)
@@ -140,6 +158,17 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
             row["val"] = evaluate(model.policy, val, val_loss)
         history.append(row)
         print(json.dumps(row), flush=True)
+        if epoch >= epochs - average_last:
+            summed = add_weights(summed, model.q_net.state_dict())
+    averaged: dict[str, Any] | None = None
+    if average_last > 1:
+        assert summed is not None
+        model.q_net.load_state_dict(mean_weights(summed, average_last))
+        model.q_net_target.load_state_dict(model.q_net.state_dict())
+        averaged = {"epochs": average_last}
+        if val is not None:
+            averaged["val"] = evaluate(model.policy, val, val_loss)
+        print(json.dumps({"averaged": averaged}), flush=True)
     model.save(out)
     report = {"data": str(data), "shards": [s.path.name for s in shards], "init": init, "out": str(out),
               "train_states": len(train.obs),
@@ -149,6 +178,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "teacher_weight": loss.weights[2], "progress_radius": loss.progress_radius,
               "progress_weight": loss.weights[3], "teacher_temperature": loss.teacher_temperature,
               "seed": seed, "batch_states": batch_states, "learning_rate": learning_rate,
+              "average_last": average_last, **({"averaged": averaged} if averaged is not None else {}),
               "seconds": round(time.monotonic() - start, 1), "history": history}
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
@@ -184,13 +214,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--progress-weight", type=float, default=1.0, help="weight of the progress term in training")
     p.add_argument("--progress-radius", type=int, default=0, help="in the progress term the lower action stands "
                    "for the allowed cells of its map within this many cells (0: the pixel)")
+    p.add_argument("--average-last", type=int, default=1, help="save the mean of the weights at the end of each of "
+                   "the last this many epochs (1: the last epoch's weights)")
     args = p.parse_args(argv)
     try:
         loss = LossOptions(args.margin, (1.0, 1.0, args.teacher_weight, args.progress_weight), args.teacher_radius,
                            args.progress_radius, args.teacher_temperature)
         run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
             loss, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
-            masks=args.teacher_over == "masked", progress=not args.no_progress, anchor=args.anchor)
+            masks=args.teacher_over == "masked", progress=not args.no_progress, anchor=args.anchor,
+            average_last=args.average_last)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2
