@@ -32,18 +32,18 @@ from shelf_env.evaluation.protocol import EpisodeRecord, by_scene, common_scenes
 from shelf_env.files import write_text_atomically
 
 
-def load(folder: pathlib.Path, reports_folder: pathlib.Path | None = None) -> tuple[dict[str, dict[str, Any]],
-                                                                                  list[dict[str, Any]]]:
+def load(folder: pathlib.Path, reports_folder: pathlib.Path | None = None,
+         falls_file: str = "falls.json") -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]]]:
     """The distillation reports by model stem (in ``reports_folder``, default ``folder``), and the fall cells
-    of ``folder``."""
+    of ``folder`` (its ``falls_file``)."""
     reports = {p.name.removesuffix(".distill.json"): json.loads(p.read_text())
                for p in sorted((reports_folder or folder).glob("*.distill.json"))}
-    cells = list(json.loads((folder / "falls.json").read_text()).values())
+    cells = list(json.loads((folder / falls_file).read_text()).values())
     for cell in cells:  # the summary of this version (cells measured before it lack the newer numbers)
         cell.update(cell_summary([FallEpisode(**e) for e in cell.get("per_episode", [])]) if "per_episode" in cell
                     else {})
     if not cells:
-        raise ValueError(f"{folder}/falls.json holds no cells")
+        raise ValueError(f"{folder}/{falls_file} holds no cells")
     return reports, cells
 
 
@@ -306,10 +306,12 @@ def main(argv: list[str] | None = None) -> int:
                    "(default: the results folder), e.g. the held-out measurements of models distilled elsewhere")
     p.add_argument("--evaluation", type=pathlib.Path, default=None, help="a shelf-evaluate folder of the same "
                    "models and the heuristics: adds each model's SR and margin over the best heuristic on its scenes")
+    p.add_argument("--falls", default="falls.json", help="the fall measurement's file in the folder (default "
+                   "falls.json; e.g. another number of scenes per N)")
     p.add_argument("--heuristics", nargs="+", default=["h-d", "h-a"], help="the policies the margin is taken "
                    "over (default: h-d h-a)")
     args = p.parse_args(argv)
-    reports, cells = load(args.folder, args.reports)
+    reports, cells = load(args.folder, args.reports, args.falls)
     data = rows(reports, cells)
     text = table(data)
     if args.evaluation is not None:

@@ -46,6 +46,11 @@ def test_the_curve_orders_models_by_states_and_keeps_references_apart(tmp_path: 
     png = tmp_path / "curve.png"
     assert scaling_curve.main([str(tmp_path), "--png", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    (tmp_path / "falls_30.json").write_text(json.dumps({"0": cell("runs/p_s_d50.zip", 8, 300, 3, 4)}))
+    out = tmp_path / "table30.md"
+    assert scaling_curve.main([str(tmp_path), "--falls", "falls_30.json", "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "| p_s_d50 | 50 | as stored, teacher over labels | 6.00 | 1.0 % / 1.0 % (3/300; 3/4 ep.) |" in text
     held_out = tmp_path / "held_out"  # the same models measured elsewhere, their reports read from here
     held_out.mkdir()
     (held_out / "falls.json").write_text(json.dumps({"0": cell("runs/p_s_d100.zip", 8, 50, 1, 2)}))

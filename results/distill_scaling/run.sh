@@ -61,6 +61,20 @@ SHARDS=s00:55,s01:50,s02:25 distil p_s_dagger75_aug_mpa_r2_ce1 all --anchor 1.0 
 SHARDS=s00:55,s01:50,s02:65 distil p_s_dagger115_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
 # ... and at the eighth session's dataset (all 205 shards at its start: 55 + 50 + 100): the sixth point
 SHARDS=s00:55,s01:50,s02:100 distil p_s_dagger150_aug_mpa_r2_ce1 all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1
+# ... the fifth and sixth points distilled again at seed 1 (the batch order and augmentation draws): how far apart two
+# models from the same data land
+SHARDS=s00:55,s01:50,s02:65 distil p_s_dagger115_aug_mpa_r2_ce1_seed1 all --anchor 1.0 --teacher-radius 2 \
+  --teacher-temperature 1 --seed 1
+SHARDS=s00:55,s01:50,s02:100 distil p_s_dagger150_aug_mpa_r2_ce1_seed1 all --anchor 1.0 --teacher-radius 2 \
+  --teacher-temperature 1 --seed 1
+# ... and the sixth point's data with the weights averaged over the last 4 epochs (one model from a stretch of
+# training rather than the last step's draw), judged on the validation scenes (seed 2000, the first 30 at N = 8)
+# beside the two plain models
+SHARDS=s00:55,s01:50,s02:100 distil p_s_dagger150_aug_mpa_r2_ce1_avg4 all --anchor 1.0 --teacher-radius 2 \
+  --teacher-temperature 1 --average-last 4
+for m in p_s_dagger150_aug_mpa_r2_ce1_avg4 p_s_dagger150_aug_mpa_r2_ce1 p_s_dagger150_aug_mpa_r2_ce1_seed1; do
+  "$PY" -m shelf_env.evaluation.falls "$M/$m.zip" --ns 8 --runs 30 --seed 2000 --out "$DIR/falls_val30.json"
+done
 
 # B + 45 min of PixelDoubleDQN with the dataset as demonstrations (the data/teacher of the time: 37 shards)
 if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then
