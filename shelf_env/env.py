@@ -456,7 +456,7 @@ class ShelfSortEnv(gym.Env):
     def step_outcome(self, action) -> dict[str, Any]:
         """The outcome of `step` without the camera: ``reward``, ``terminated``, ``fell``, ``is_success`` and
         ``num_sorted`` exactly as `step` returns them (the camera runs after the physics and the task's rules,
-        so it changes none of them), at about two thirds of a step's cost. It leaves the env without an
+        so it changes none of them), at about 0.6x the cost of a forked step. It leaves the env without an
         observation of its new state, so only a copy that is thrown away after may call it: a forked probe
         (`shelf_env.privileged.lookahead.probe_outcome`) that needs the outcome, not the next image."""
         name, judgement, reward, _ = self._act(action)

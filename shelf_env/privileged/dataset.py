@@ -4,7 +4,7 @@ A camera-only policy has to learn which actions drop an object and which make pr
 episodes' own terminal rewards teach that too slowly (one fall per episode). Here every visited
 state carries many labels, each the exact outcome of one masked action tried in a forked copy of
 the simulator (`shelf_env.privileged.lookahead.probe_step`, or `probe_outcome` where the next image is not needed: the
-same outcome without the copy's camera, a third cheaper): did an object fall, did the scene stay valid,
+same outcome without the copy's camera, about 40 % cheaper): did an object fall, did the scene stay valid,
 how did the number of sorted objects change, did the step sort the scene. The labelled actions,
 without repeats (at most ``max_probes``; past that only the teacher's and the greedy action): the
 teacher's own probes (its chosen action among them), the driving model's greedy masked action, one

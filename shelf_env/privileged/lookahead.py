@@ -146,7 +146,7 @@ def probe_step(env: gym.Env, action: int) -> Outcome:
 def probe_outcome(env: gym.Env, action: int) -> Outcome:
     """`probe_step` without the next observation (`ShelfSortEnv.step_outcome`: the copy skips the camera):
     the same reward, flags and sorted count, ``obs_sha256`` empty and ``next_obs`` None. For labels that need
-    the outcome alone (the teacher dataset's probes), at about two thirds of `probe_step`'s cost
+    the outcome alone (the teacher dataset's probes), at 0.55-0.66x `probe_step`'s cost at N = 5..11
     (``benchmarks/probe_cost.py``)."""
     report = in_fork(env, lambda base: base.step_outcome(int(action)), f"stepping action {action}")
     return Outcome(obs_sha256="", **report)
