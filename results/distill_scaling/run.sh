@@ -75,6 +75,7 @@ SHARDS=s00:55,s01:50,s02:100 distil p_s_dagger150_aug_mpa_r2_ce1_avg4 all --anch
 for m in p_s_dagger150_aug_mpa_r2_ce1_avg4 p_s_dagger150_aug_mpa_r2_ce1 p_s_dagger150_aug_mpa_r2_ce1_seed1; do
   "$PY" -m shelf_env.evaluation.falls "$M/$m.zip" --ns 8 --runs 30 --seed 2000 --out "$DIR/falls_val30.json"
 done
+"$PY" research/scaling_curve.py "$DIR" --falls falls_val30.json --out "$DIR/val30.md"
 
 # B + 45 min of PixelDoubleDQN with the dataset as demonstrations (the data/teacher of the time: 37 shards)
 if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then

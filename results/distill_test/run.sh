@@ -90,11 +90,25 @@ done
 # ... and the same loop breaker on the heuristics and the shipped P+S over the same three seeds (like with like)
 .venv/bin/shelf-evaluate --policies h-d+loop-breaker h-a+loop-breaker "$ps+loop-breaker" --ns 5,8,11 --runs 30 --seeds 3 \
   --object-sets ycb --out results/distill_test "$@"
+# the eighth session: the same recipe at all 205 shards the dataset held at its start (55 + 50 + 100: the sixth point),
+# the fifth and sixth points distilled again at seed 1, and the sixth point's data with its weights averaged over the
+# last 4 epochs (results/distill_scaling/run.sh), each on all three seeds at N = 5, 8, 11; the sixth point's falls on the
+# first 30 scenes at N = 8 (falls30.json)
+for m in p_s_dagger150_aug_mpa_r2_ce1 p_s_dagger150_aug_mpa_r2_ce1_seed1 p_s_dagger115_aug_mpa_r2_ce1_seed1 \
+    p_s_dagger150_aug_mpa_r2_ce1_avg4; do
+  [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
+  .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
+    --out results/distill_test "$@"
+done
+.venv/bin/python -m shelf_env.evaluation.falls $M/p_s_dagger150_aug_mpa_r2_ce1.zip --ns 8 --runs 30 --seed 0 \
+  --out results/distill_test/falls30.json
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
   h-d+loop-breaker h-a+loop-breaker $M/p_s_d52sh_aug_mpa.zip $M/p_s_dagger7_aug_mpa.zip $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
   $M/p_s_dagger19_aug_mpa_r2_ce1.zip $M/p_s_dagger48_aug_mpa_r2_ce1.zip $M/p_s_dagger75_aug_mpa_r2_ce1.zip $FT \
   $M/p_s_dagger115_aug_mpa_r2_ce1.zip $FT2 $M/p_s_dagger115_aug_mpa_r2_ce1.zip+loop-breaker $FT2+loop-breaker \
+  $M/p_s_dagger150_aug_mpa_r2_ce1.zip $M/p_s_dagger150_aug_mpa_r2_ce1_seed1.zip $M/p_s_dagger115_aug_mpa_r2_ce1_seed1.zip \
+  $M/p_s_dagger150_aug_mpa_r2_ce1_avg4.zip \
   --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
 # the held-out scaling curve: falls and SR on the first 10 scenes per N (falls.json), and each model's SR and
 # margin over the better heuristic on every evaluation scene it played (90 per N for the cross-entropy models)
@@ -105,7 +119,7 @@ done
   --evaluation results/distill_test --heuristics h-d h-a h-d+loop-breaker h-a+loop-breaker \
   --out results/distill_test/scaling_loop_breaker.md
 for m in p_s_d52sh_aug_mpa p_s_dagger7_aug_mpa p_s_dagger7_aug_mpa_r2_ce1 p_s_dagger19_aug_mpa_r2_ce1 \
-    p_s_dagger48_aug_mpa_r2_ce1 p_s_dagger75_aug_mpa_r2_ce1 p_s_dagger115_aug_mpa_r2_ce1; do
+    p_s_dagger48_aug_mpa_r2_ce1 p_s_dagger75_aug_mpa_r2_ce1 p_s_dagger115_aug_mpa_r2_ce1 p_s_dagger150_aug_mpa_r2_ce1; do
   .venv/bin/python -m shelf_env.evaluation.report results/distill_test --learned $m --pick-only s --heuristics h-d h-a \
     --out results/distill_test/report_$m.md
 done
