@@ -17,7 +17,9 @@ argmax, unless ``--teacher-over labelled`` (its labelled actions only); with ``-
 teacher's action stands for the cells of its map within R cells (its object rather than one pixel), and
 with ``--progress-radius R`` the lower action of a progress pair does;
 the progress term ranks a state's valid actions by the change in sorted objects they made, unless
-``--no-progress``. The model is saved atomically (an SB3 zip that `PixelDoubleDQN.load` and
+``--no-progress``. With ``--average-last K`` the saved weights are the mean of the weights after each of the
+last K epochs (the report's ``averaged`` holds their validation). The report records what reproduces the run
+(options, shards, ``seed``). The model is saved atomically (an SB3 zip that `PixelDoubleDQN.load` and
 ``shelf-train --init-from`` take); the report goes beside it as JSON.
 """
 
