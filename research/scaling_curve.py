@@ -87,6 +87,16 @@ def final_val_loss(report: dict[str, Any]) -> float:
     return (report.get("averaged") or {}).get("val", report["history"][-1]["val"])["loss"]
 
 
+def from_report(report: dict[str, Any]) -> dict[str, Any]:
+    """A distilled model's row fields read from its distillation report: training states, validation loss, recipe."""
+    return {"states": report["train_states"], "val_loss": final_val_loss(report), "recipe": recipe(report)}
+
+
+def order(row: dict[str, Any]) -> tuple[bool, str, int, bool]:
+    """The rows' order: per recipe by training states, a wrapped model after its plain one, references last."""
+    return row["states"] is None, row["recipe"] or "", row["states"] or 0, row["wrapped"]
+
+
 def rows(reports: dict[str, dict[str, Any]], cells: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per policy: its training states (0 for the starting model, None for a reference), its
     distillation's recipe and last validation loss, and per N the fall cell's numbers. A distilled
@@ -102,16 +112,13 @@ def rows(reports: dict[str, dict[str, Any]], cells: list[dict[str, Any]]) -> lis
                                       "val_loss": None, "recipe": None, "wrapped": bool(wrapper),
                                       "zip": name.endswith(".zip"), "by_n": {}})
         if stem in reports:
-            row["states"] = reports[stem]["train_states"]
-            row["val_loss"] = final_val_loss(reports[stem])
-            row["recipe"] = recipe(reports[stem])
+            row.update(from_report(reports[stem]))
         elif name in starts:
             row["states"] = 0
             first = next(r for r in reports.values() if r["init"] == name)["history"][0]
             row["val_loss"] = first["val"]["loss"]
         row["by_n"][cell["num_objects"]] = cell
-    return sorted(out.values(), key=lambda r: (r["states"] is None, r["recipe"] or "", r["states"] or 0,
-                                               r["wrapped"]))
+    return sorted(out.values(), key=order)
 
 
 def add_evaluated(data: list[dict[str, Any]], reports: dict[str, dict[str, Any]],
@@ -121,11 +128,8 @@ def add_evaluated(data: list[dict[str, Any]], reports: dict[str, dict[str, Any]]
     known = {r["policy"] for r in data}
     for label in sorted({r.policy for r in records} - known):
         if label in reports:
-            report = reports[label]
-            data.append({"policy": label, "states": report["train_states"],
-                         "val_loss": final_val_loss(report), "recipe": recipe(report),
-                         "wrapped": False, "zip": True, "by_n": {}})
-    return sorted(data, key=lambda r: (r["states"] is None, r["recipe"] or "", r["states"] or 0, r["wrapped"]))
+            data.append({"policy": label, **from_report(reports[label]), "wrapped": False, "zip": True, "by_n": {}})
+    return sorted(data, key=order)
 
 
 def table(data: list[dict[str, Any]]) -> str:

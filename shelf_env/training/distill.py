@@ -35,7 +35,7 @@ import time
 from typing import Any
 
 import numpy as np
-import torch
+from torch.optim.swa_utils import AveragedModel
 
 from sb3_pixeldqn.distill import DEFAULT_WEIGHTS, LabelledStates, LossOptions, distill, evaluate
 from shelf_env.files import write_json_atomically
@@ -92,17 +92,6 @@ def select_shards(shards: list[dataset.Shard], spec: int | str | None) -> list[d
     return sorted(out, key=lambda s: s.path.name)
 
 
-def add_weights(summed: dict[str, Any] | None, state: dict[str, Any]) -> dict[str, Any]:
-    """``summed`` plus a copy of the network weights ``state`` (a state dict), in float64; a new sum when None."""
-    fresh = {k: v.detach().to(dtype=torch.float64, copy=True) for k, v in state.items()}
-    return fresh if summed is None else {k: summed[k] + fresh[k] for k in summed}
-
-
-def mean_weights(summed: dict[str, Any], count: int) -> dict[str, Any]:
-    """The state dict of ``count`` summed weights' mean (`add_weights`), in float32 as the networks hold them."""
-    return {k: (v / count).to(torch.float32) for k, v in summed.items()}
-
-
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
         max_states: int | None = None, batch_states: int = 16, loss: LossOptions = LossOptions(),
         learning_rate: float | None = None, seed: int = 0, max_shards: int | str | None = None,
@@ -148,7 +137,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     anchor_net = copy.deepcopy(model.q_net).requires_grad_(False) if anchor > 0 else None
     start = time.monotonic()
     history: list[dict[str, Any]] = []
-    summed: dict[str, Any] | None = None
+    mean_net = AveragedModel(model.q_net) if average_last > 1 else None  # the equal-weight running mean
     if val is not None:  # the starting model, for comparison
         history.append({"epoch": 0, "val": evaluate(model.policy, val, val_loss)})
         print(json.dumps(history[-1]), flush=True)
@@ -160,12 +149,11 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
             row["val"] = evaluate(model.policy, val, val_loss)
         history.append(row)
         print(json.dumps(row), flush=True)
-        if epoch >= epochs - average_last:
-            summed = add_weights(summed, model.q_net.state_dict())
+        if mean_net is not None and epoch >= epochs - average_last:
+            mean_net.update_parameters(model.q_net)
     averaged: dict[str, Any] | None = None
-    if average_last > 1:
-        assert summed is not None
-        model.q_net.load_state_dict(mean_weights(summed, average_last))
+    if mean_net is not None:
+        model.q_net.load_state_dict(mean_net.module.state_dict())
         model.q_net_target.load_state_dict(model.q_net.state_dict())
         averaged = {"epochs": average_last}
         if val is not None:
