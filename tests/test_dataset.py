@@ -185,12 +185,22 @@ def test_average_last_saves_the_mean_of_the_last_epochs_weights(one_shard: pathl
 
     first = distil("one", "--epochs", "1")  # epoch 1 alone (each epoch's batch order comes from seed + epoch)
     second = distil("two", "--epochs", "2")  # the same epoch 1, then epoch 2
-    mean = distil("mean", "--epochs", "2", "--average-last", "2")
+    mean = distil("mean", "--epochs", "2", "--average-last", "2", "--last-out", str(tmp_path / "last.zip"))
     assert any(not torch.equal(first[k], second[k]) for k in first)  # the epochs moved the weights
     for k in mean:
         torch.testing.assert_close(mean[k], (first[k] + second[k]) / 2, rtol=1e-5, atol=1e-6)
     report = json.loads((tmp_path / "mean.distill.json").read_text())
     assert report["average_last"] == 2 and report["averaged"] == {"epochs": 2}  # no validation states here
+    # --last-out: the same run's last epoch, which is the plain 2-epoch model, with that model's report
+    last = PixelDoubleDQN.load(tmp_path / "last.zip", device="cpu").q_net.state_dict()
+    assert all(torch.equal(last[k], second[k]) for k in second)
+    plain = json.loads((tmp_path / "last.distill.json").read_text())
+    assert plain["average_last"] == 1 and "averaged" not in plain and plain["out"] == str(tmp_path / "last.zip")
+    assert plain["history"] == report["history"]
+    assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(tmp_path / "x.zip"),
+                             "--epochs", "2", "--last-out", str(tmp_path / "y.zip")]) == 2
+    assert "last_out needs average_last > 1" in capsys.readouterr().err
+    assert not (tmp_path / "x.zip").exists() and not (tmp_path / "y.zip").exists()
     assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(tmp_path / "x.zip"),
                              "--epochs", "2", "--average-last", "3"]) == 2
     assert "average_last must be between 1 and the epochs (2), got 3" in capsys.readouterr().err

@@ -18,9 +18,10 @@ teacher's action stands for the cells of its map within R cells (its object rath
 with ``--progress-radius R`` the lower action of a progress pair does;
 the progress term ranks a state's valid actions by the change in sorted objects they made, unless
 ``--no-progress``. With ``--average-last K`` the saved weights are the mean of the weights after each of the
-last K epochs (the report's ``averaged`` holds their validation). The report records what reproduces the run
-(options, shards, ``seed``). The model is saved atomically (an SB3 zip that `PixelDoubleDQN.load` and
-``shelf-train --init-from`` take); the report goes beside it as JSON.
+last K epochs (the report's ``averaged`` holds their validation); ``--last-out PATH`` also saves the last
+epoch's own weights there, with their report, so that one run gives both models of a comparison. The report
+records what reproduces the run (options, shards, ``seed``). The model is saved atomically (an SB3 zip that
+`PixelDoubleDQN.load` and ``shelf-train --init-from`` take); the report goes beside it as JSON.
 """
 
 from __future__ import annotations
@@ -96,7 +97,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         max_states: int | None = None, batch_states: int = 16, loss: LossOptions = LossOptions(),
         learning_rate: float | None = None, seed: int = 0, max_shards: int | str | None = None,
         augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0,
-        average_last: int = 1) -> dict[str, Any]:
+        average_last: int = 1, last_out: pathlib.Path | None = None) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
     draw each batch's states through the model's own augmentation (its exact symmetries), as its training did.
     ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions).
@@ -105,13 +106,17 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     loss's margin, weights, radii and temperature in training (`LossOptions`); the validation loss keeps the
     default weights, so that recipes compare. ``average_last`` > 1: the saved model's weights are the mean of its
     weights at the end of each of the last that many epochs (one model from a stretch of training rather than the
-    last step's draw; the report's ``averaged`` holds its validation); 1: the last epoch's."""
+    last step's draw; the report's ``averaged`` holds its validation); 1: the last epoch's. ``last_out``: with
+    ``average_last`` > 1, also save the last epoch's weights there (the model a run without averaging saves, since
+    distillation is deterministic for a seed), its report beside it."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     if epochs < 1 or not 0 <= val_fraction < 1:
         raise ValueError(f"need epochs >= 1 and val_fraction in [0, 1), got {epochs} and {val_fraction}")
     if not 1 <= average_last <= epochs:
         raise ValueError(f"average_last must be between 1 and the epochs ({epochs}), got {average_last}")
+    if last_out is not None and (average_last == 1 or pathlib.Path(last_out).resolve() == pathlib.Path(out).resolve()):
+        raise ValueError("last_out needs average_last > 1 and a path other than out")
     val_loss = dataclasses.replace(loss, weights=DEFAULT_WEIGHTS)
     if not pathlib.Path(init).is_file():
         raise ValueError(f"--init {init!r} does not exist")
@@ -152,6 +157,10 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         if mean_net is not None and epoch >= epochs - average_last:
             mean_net.update_parameters(model.q_net)
     averaged: dict[str, Any] | None = None
+    plain_report: dict[str, Any] | None = None
+    if last_out is not None:  # the last epoch's weights, before the mean replaces them
+        model.save(last_out)
+        plain_report = {"out": str(last_out), "average_last": 1}
     if mean_net is not None:
         model.q_net.load_state_dict(mean_net.module.state_dict())
         model.q_net_target.load_state_dict(model.q_net.state_dict())
@@ -170,6 +179,9 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "seed": seed, "batch_states": batch_states, "learning_rate": learning_rate,
               "average_last": average_last, **({"averaged": averaged} if averaged is not None else {}),
               "seconds": round(time.monotonic() - start, 1), "history": history}
+    if plain_report is not None:
+        plain = {k: v for k, v in report.items() if k != "averaged"} | plain_report
+        write_json_atomically(pathlib.Path(last_out).with_suffix(".distill.json"), plain)  # type: ignore[arg-type]
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
 
@@ -206,6 +218,8 @@ def main(argv: list[str] | None = None) -> int:
                    "for the allowed cells of its map within this many cells (0: the pixel)")
     p.add_argument("--average-last", type=int, default=1, help="save the mean of the weights at the end of each of "
                    "the last this many epochs (1: the last epoch's weights)")
+    p.add_argument("--last-out", type=pathlib.Path, default=None, help="with --average-last: also save the last "
+                   "epoch's own weights (and their report) here")
     args = p.parse_args(argv)
     try:
         loss = LossOptions(args.margin, (1.0, 1.0, args.teacher_weight, args.progress_weight), args.teacher_radius,
@@ -213,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
         run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
             loss, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
             masks=args.teacher_over == "masked", progress=not args.no_progress, anchor=args.anchor,
-            average_last=args.average_last)
+            average_last=args.average_last, last_out=args.last_out)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2
