@@ -170,6 +170,21 @@ def test_cli_writes_results_and_resumes(tmp_path, capsys):
                                                                              "unrecorded": 1}
 
 
+def test_first_seed_plays_other_scenes(tmp_path, capsys):
+    """--first-seed F plays seeds F..F+S-1 (validation scenes), the same episodes a held-out cell of seed F is."""
+    out = tmp_path / "val"
+    argv = ["--policies", "h-a", "--ns", "1", "--runs", "1", "--seeds", "1", "--object-sets", "train",
+            "--workers", "1"]
+    assert evaluate_cli.main([*argv, "--first-seed", "2000", "--out", str(out)]) == 0
+    assert [p.name for p in (out / "cells").glob("*.json")] == ["h-a__train__N01__seed2000__runs1.json"]
+    record = ev.load_cell(out / "cells" / "h-a__train__N01__seed2000__runs1.json")[0]
+    assert record.seed == 2000 and record == ev.evaluate_cell("h-a", 1, 2000, 1, "train")[0]
+    data = json.loads((out / "results.json").read_text())
+    assert data["config"]["first_seed"] == 2000 and data["config"]["complete"]
+    assert evaluate_cli.main([*argv, "--first-seed", "-1", "--out", str(tmp_path / "bad")]) == 2
+    assert "--first-seed must be >= 0, got -1" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+
+
 def test_a_label_stands_for_one_checkpoint_file(tmp_path, capsys):
     """Cells are named by the checkpoint's stem: another file of that name (a retrained model shipped
     again) is refused in a folder holding the first one's cells, instead of reusing them; two

@@ -5,7 +5,9 @@
 
 Policies: ``h-d``, ``h-a``, ``random``, the privileged diagnostics ``h-d-lookahead`` and
 ``h-a-lookahead`` (`shelf_env.privileged.lookahead`) or a PixelDoubleDQN checkpoint zip (its P+S or S layout
-decides the env's primitives). Every (policy, object set, N, seed) cell runs in a worker process
+decides the env's primitives). The seeds are 0..S-1, the held-out scenes learning claims use; ``--first-seed F``
+plays F..F+S-1 instead (e.g. the validation scenes of seed 2000, where a choice between models may look).
+Every (policy, object set, N, seed) cell runs in a worker process
 and is written to ``<out>/cells/`` as soon as it finishes; running the same command again skips
 the cells already on disk, so an interrupted evaluation resumes. A checkpoint's cells are named
 by its file stem, and ``<out>/cells/<stem>.sha256`` records which file they came from: another file
@@ -97,6 +99,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--ns", type=parse_ns, default=list(range(3, 15)), help="e.g. 3-14 or 3,5,8")
     p.add_argument("--runs", type=int, default=100, help="episodes per (policy, N, seed) (paper: 100)")
     p.add_argument("--seeds", type=int, default=5, help="number of seeds, 0..S-1 (paper: 5)")
+    p.add_argument("--first-seed", type=int, default=0, metavar="F",
+                   help="play seeds F..F+S-1 instead: other scenes, e.g. validation scenes for choosing a model "
+                        "(shelf_env.evaluation.falls.VALIDATION_SEED) that the held-out 0..S-1 never serve")
     p.add_argument("--object-sets", nargs="+", choices=["ycb", "train"], default=["ycb"],
                    help="unseen YCB objects (the paper's test) and/or the training objects (Fig. 12)")
     p.add_argument("--out", type=pathlib.Path, required=True,
@@ -264,6 +269,8 @@ def main(argv: list[str] | None = None) -> int:
         ns = ev.check_ns(args.ns)
         if args.runs < 1 or args.seeds < 1 or args.workers < 1:
             raise ValueError("--runs, --seeds and --workers must be >= 1")
+        if args.first_seed < 0:
+            raise ValueError(f"--first-seed must be >= 0, got {args.first_seed}")
         if args.backend == "ray":
             try:
                 import ray  # noqa: F401
@@ -290,7 +297,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     jobs = [
         (policy, n, seed, object_set)
-        for n in ns for seed in range(args.seeds) for object_set in args.object_sets for policy in args.policies
+        for n in ns for seed in range(args.first_seed, args.first_seed + args.seeds)
+        for object_set in args.object_sets for policy in args.policies
     ]
     paths = {job: ev.cell_path(args.out, job[0], job[3], job[1], job[2], args.runs) for job in jobs}
     todo = [job for job in jobs if not paths[job].exists()]
@@ -321,7 +329,8 @@ def main(argv: list[str] | None = None) -> int:
         print("no finished cells yet")
         return 0
     records = [r for job in done for r in ev.load_cell(paths[job])]
-    config = {"policies": args.policies, "ns": ns, "runs": args.runs, "seeds": args.seeds, "conditions": conditions,
+    config = {"policies": args.policies, "ns": ns, "runs": args.runs, "seeds": args.seeds,
+              **({"first_seed": args.first_seed} if args.first_seed else {}), "conditions": conditions,
               "object_sets": args.object_sets, "complete": len(done) == len(jobs),
               "command": " ".join(["shelf-evaluate", *(sys.argv[1:] if argv is None else argv)])}
     rows = ev.write_results(args.out, records, config)
