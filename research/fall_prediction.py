@@ -8,8 +8,8 @@ on scenes that no training or evaluation used (``scene_seed(5, N, run)``; the ev
 - pairs: (rejected pick, the teacher's action) at the same state; ``ranked`` is the share where the
   checkpoint values the teacher's action above the rejected pick;
 - ``greedy invalid``: the share of states where the checkpoint's own greedy action (masked argmax,
-  as `shelf-evaluate` acts), tried in a forked copy of the env (`probe_step`), would end the
-  episode invalid (an object falls, or the scene is not at rest): at those decisions, and at the
+  as `shelf-evaluate` acts), tried in a forked copy of the env (`probe_outcome`: the step without its
+  camera), would end the episode invalid (an object falls, or the scene is not at rest): at those decisions, and at the
   teacher's other decisions (no pick rejected).
 
     python research/fall_prediction.py results/training/p_s_long.zip results/training/p_s_la.zip \
@@ -28,7 +28,7 @@ from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env import params
 from shelf_env.evaluation.protocol import scene_seed
 from shelf_env.files import write_text_atomically
-from shelf_env.privileged.lookahead import LookaheadDistance, probe_step
+from shelf_env.privileged.lookahead import LookaheadDistance, probe_outcome
 
 HELD_OUT_SEED = 5  # scene_seed's seed index: the evaluations use 0..2, training its own RNG
 
@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
                     q = model.policy.q_map_values(obs).reshape(-1)  # the env's action order
                     greedy = int(model.predict(obs, deterministic=True, action_masks=mask)[0])
                     if greedy not in valid:
-                        valid[greedy] = probe_step(env, greedy).valid
+                        valid[greedy] = probe_outcome(env, greedy).valid
                     invalid = int(not valid[greedy])
                     c = counts[name]
                     if rejected:

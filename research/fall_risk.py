@@ -9,7 +9,7 @@ episode, and the Q-value of a 10 % risky pick is close to that of a safe one und
 reward. This module learns the risk directly, as a supervised problem with dense labels:
 
 - `collect_episode` plays a training scene (training objects, seeds of their own) and, at every
-  step, tries several picks in forked copies of the env (`shelf_env.privileged.lookahead.probe_step`): the
+  step, tries several picks in forked copies of the env (`shelf_env.privileged.lookahead.probe_outcome`): the
   H-d candidate of every visible object, one random graspable cell of every visible object, and
   the greedy pick of a driving model. Each probe is a label: did the pick end the episode invalid
   (an object fell, the scene did not come to rest)? The step it then executes is a safe one when
@@ -57,7 +57,7 @@ from sb3_pixeldqn.networks import DEFAULT_WIDTHS, ResidualFCN
 from shelf_env import params, policies
 from shelf_env.baselines.heuristics import ObservationView
 from shelf_env.files import write_atomically, write_json_atomically
-from shelf_env.privileged.lookahead import LookaheadDistance, probe_step
+from shelf_env.privileged.lookahead import LookaheadDistance, probe_outcome
 from shelf_env.symmetry import PermuteClasses
 
 #: Seed of the collection's scenes (`collect_seed`): no evaluation or training run draws from it.
@@ -114,7 +114,7 @@ def collect_episode(env: gym.Env, model: Any, reset_seed: int, rng: np.random.Ge
         cells = probe_cells(hd, view, greedy, rng, max_probes)
         safe = []
         for row, col in cells:
-            invalid = not probe_step(env, codec.encode("pick", row, col)).valid
+            invalid = not probe_outcome(env, codec.encode("pick", row, col)).valid
             probes.append((len(observations), row, col, int(invalid)))
             if not invalid:
                 safe.append((row, col))
