@@ -76,6 +76,21 @@ for m in p_s_dagger150_aug_mpa_r2_ce1_avg4 p_s_dagger150_aug_mpa_r2_ce1 p_s_dagg
   "$PY" -m shelf_env.evaluation.falls "$M/$m.zip" --ns 8 --runs 30 --seed 2000 --out "$DIR/falls_val30.json"
 done
 "$PY" research/scaling_curve.py "$DIR" --falls falls_val30.json --out "$DIR/val30.md"
+# The ninth session: averaging validated as the held-out grid is played. The sixth point's data at seed 1 with the
+# weights averaged (its seed-0 twin is above); the four models on the validation scenes (evaluation seeds
+# 2000-2002, 90 per N at N = 5, 8, 11), each averaged model against its own plain one on the same scenes
+SHARDS=s00:55,s01:50,s02:100 distil p_s_dagger150_aug_mpa_r2_ce1_seed1_avg4 all --anchor 1.0 --teacher-radius 2 \
+  --teacher-temperature 1 --seed 1 --average-last 4
+b=p_s_dagger150_aug_mpa_r2_ce1
+"$PY" -m shelf_env.cli.evaluate --policies "$M/${b}_avg4.zip" "$M/$b.zip" "$M/${b}_seed1_avg4.zip" "$M/${b}_seed1.zip" \
+  --ns 5,8,11 --runs 30 --seeds 3 --first-seed 2000 --object-sets ycb --workers 1 --out "$DIR/val90"
+"$PY" -m shelf_env.evaluation.compare "$DIR/val90" --pair "${b}_avg4" "$b" --pair "${b}_seed1_avg4" "${b}_seed1" \
+  --out "$DIR/val90_averaging.md"
+# (the session ran these with --last-out, each run saving the plain twin too: the same weights as the lines above)
+# ... and the seventh point: all 256 shards at the ninth session's start (55 + 50 + 151), averaged and plain from one run
+SHARDS=s00:55,s01:50,s02:151 distil p_s_dagger201_aug_mpa_r2_ce1_avg4 all --anchor 1.0 --teacher-radius 2 \
+  --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger201_aug_mpa_r2_ce1.zip"
+cp "$M/p_s_dagger201_aug_mpa_r2_ce1.distill.json" "$DIR/"
 
 # B + 45 min of PixelDoubleDQN with the dataset as demonstrations (the data/teacher of the time: 37 shards)
 if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then
