@@ -52,6 +52,10 @@ class Paired:
         return mcnemar_exact(self.a_only, self.b_only)
 
 
+#: No scenes: the start of a sum of comparisons.
+NOTHING = Paired(0, 0, 0, 0, 0)
+
+
 def mcnemar_exact(a_only: int, b_only: int) -> float:
     """Two-sided exact McNemar p-value of ``a_only`` against ``b_only`` discordant pairs (a binomial test at 1/2)."""
     if a_only < 0 or b_only < 0:
@@ -100,14 +104,14 @@ def markdown(results: dict[tuple[str, str], dict[int, Paired]]) -> str:
     """One table per pair (a row per N, then pooled over N) and, with several pairs, one pooling them."""
     parts: list[str] = []
     for (a, b), by_n in results.items():
-        pooled = sum(by_n.values(), Paired(0, 0, 0, 0, 0))
+        pooled = sum(by_n.values(), NOTHING)
         parts += [f"**A = {a}, B = {b}**", "", HEADER, *(_row(str(n), c) for n, c in by_n.items()),
                   _row("pooled", pooled), ""]
     if len(results) > 1:
         ns = sorted({n for by_n in results.values() for n in by_n})
-        rows = [_row(str(n), sum((by_n[n] for by_n in results.values() if n in by_n), Paired(0, 0, 0, 0, 0)))
+        rows = [_row(str(n), sum((by_n[n] for by_n in results.values() if n in by_n), NOTHING))
                 for n in ns]
-        everything = sum((c for by_n in results.values() for c in by_n.values()), Paired(0, 0, 0, 0, 0))
+        everything = sum((c for by_n in results.values() for c in by_n.values()), NOTHING)
         parts += [f"**All {len(results)} pairs pooled** (A: {', '.join(a for a, _ in results)}; "
                   f"B: {', '.join(b for _, b in results)})", "", HEADER, *rows, _row("pooled", everything), ""]
     return "\n".join(parts)

@@ -157,10 +157,8 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         if mean_net is not None and epoch >= epochs - average_last:
             mean_net.update_parameters(model.q_net)
     averaged: dict[str, Any] | None = None
-    plain_report: dict[str, Any] | None = None
     if last_out is not None:  # the last epoch's weights, before the mean replaces them
         model.save(last_out)
-        plain_report = {"out": str(last_out), "average_last": 1}
     if mean_net is not None:
         model.q_net.load_state_dict(mean_net.module.state_dict())
         model.q_net_target.load_state_dict(model.q_net.state_dict())
@@ -179,9 +177,9 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "seed": seed, "batch_states": batch_states, "learning_rate": learning_rate,
               "average_last": average_last, **({"averaged": averaged} if averaged is not None else {}),
               "seconds": round(time.monotonic() - start, 1), "history": history}
-    if plain_report is not None:
-        plain = {k: v for k, v in report.items() if k != "averaged"} | plain_report
-        write_json_atomically(pathlib.Path(last_out).with_suffix(".distill.json"), plain)  # type: ignore[arg-type]
+    if last_out is not None:  # the plain model's report: this run's, without the mean
+        plain = {k: v for k, v in report.items() if k != "averaged"} | {"out": str(last_out), "average_last": 1}
+        write_json_atomically(pathlib.Path(last_out).with_suffix(".distill.json"), plain)
     write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
     return report
 
