@@ -1,6 +1,6 @@
 """A distilled model as a veto on the shipped P+S's choice (an experiment, camera-only at test time).
 
-    python -m research.distilled_veto make --base examples/pretrained/p_s.zip \\
+    python -m research.distilled_veto make --base examples/pretrained/v1/p_s.zip \\
         --veto runs/distill_scaling/p_s_d440_aug_mpa.zip --delta 1 --out results/distilled_veto/model/p_s_v440_d1.zip
     python -m research.distilled_veto falls results/distilled_veto/model/p_s_v440_d1.zip+veto --ns 8 --runs 10 \\
         --seed 2000 --out results/distilled_veto/falls.json      (shelf_env.evaluation.falls with +veto known)
@@ -202,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m research.distilled_veto", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
     m = sub.add_parser("make", help="a copy of the base checkpoint with its veto settings beside it")
-    m.add_argument("--base", type=pathlib.Path, default=pathlib.Path("examples/pretrained/p_s.zip"))
+    m.add_argument("--base", type=pathlib.Path, default=pathlib.Path("examples/pretrained/v1/p_s.zip"))
     m.add_argument("--veto", type=pathlib.Path, required=True, help="the distilled model (an SB3 zip)")
     m.add_argument("--delta", type=float, required=True, help="kept: within this of the veto model's best")
     m.add_argument("--out", type=pathlib.Path, required=True, help="the copy (.zip); its stem is the label")

@@ -16,5 +16,5 @@ name=$1; shift
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
 cp "results/training/$name/model.zip" "results/training/$name.zip"
-shelf-evaluate --policies "results/training/$name.zip" examples/pretrained/p_s.zip h-d h-a --ns 5,8,11 \
+shelf-evaluate --policies "results/training/$name.zip" examples/pretrained/v1/p_s.zip h-d h-a --ns 5,8,11 \
     --runs 30 --seeds 1 --object-sets ycb --reuse-cells results/models --out "results/$name" "$@"

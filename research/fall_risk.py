@@ -512,7 +512,7 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--episodes", type=int, required=True, help="episodes of this shard (those on disk are skipped)")
     c.add_argument("--shard", type=int, default=0)
     c.add_argument("--ns", type=int, nargs="+", default=list(range(3, 15)))
-    c.add_argument("--model", default="examples/pretrained/p_s.zip", help="driving model ('none': H-d only)")
+    c.add_argument("--model", default="examples/pretrained/v1/p_s.zip", help="driving model ('none': H-d only)")
     c.add_argument("--object-set", default="train")
     c.add_argument("--explore", type=float, default=0.2)
     c.add_argument("--hours", type=float, default=None)
@@ -520,7 +520,7 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--data", type=pathlib.Path, required=True)
     t.add_argument("--out", type=pathlib.Path, required=True,
                    help="the model file; <stem>.fall_risk.pt beside a checkpoint for <checkpoint>+fall-filter")
-    t.add_argument("--init", default="examples/pretrained/p_s.zip", help="zip whose pick FCN starts it ('none')")
+    t.add_argument("--init", default="examples/pretrained/v1/p_s.zip", help="zip whose pick FCN starts it ('none')")
     t.add_argument("--epochs", type=int, default=8)
     t.add_argument("--batch", type=int, default=32)
     k = sub.add_parser("check", help="the filter's effect on a model's choice among the probed picks, held out")

@@ -1,14 +1,23 @@
 #!/usr/bin/env bash
-# Issue 10: copy every finished model run (results/training/p_s, results/training/s; its curriculum
-# is over) to examples/pretrained/<model>.zip and write examples/pretrained/README.md, the model
-# card, with the evaluation table once scripts/evaluate_models.sh has evaluated the shipped models.
-# Order: train_model.sh p_s|s -> ship_models.sh -> evaluate_models.sh -> ship_models.sh (the card's table).
+# Copy the shipped models to examples/pretrained/ and write examples/pretrained/README.md, their cards
+# (python -m shelf_env.training.ship): every finished run (results/training/s -> s.zip; results/training/p_s ->
+# v1/p_s.zip, the P+S trained with PixelDoubleDQN, shipped as p_s.zip until 2026-12-04) and, with
+# --distilled ZIP, a distilled P+S as p_s.zip with its report (a distilled p_s.zip already on the shelf keeps
+# its card). Each card's evaluation table comes from the first of results/models_v2/open (the distilled P+S's
+# §V evaluation) and results/models (issue 10's) that evaluated it, where they are complete.
+# Order: train_model.sh p_s|s or distill -> ship_models.sh -> evaluate_models.sh / results/models_v2/run.sh ->
+# ship_models.sh (the cards' tables). The distilled P+S shipped on 2026-12-04:
+#   bash scripts/ship_models.sh --distilled runs/distill_scaling/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
+folders=()
+for f in results/models_v2/open results/models; do
+  if [ -f $f/results.json ] && python -c "import json,sys; sys.exit(0 if json.load(open('$f/results.json'))['config'].get('complete') else 1)"; then
+    folders+=("$f")
+  fi
+done
 args=()
-if [ -f results/models/results.json ] && python -c "import json,sys; sys.exit(0 if json.load(open('results/models/results.json'))['config'].get('complete') else 1)"; then
-  args+=(--results results/models)
-fi
+[ ${#folders[@]} -gt 0 ] && args+=(--results "${folders[@]}")
 python -m shelf_env.training.ship "${args[@]}" "$@"

@@ -11,7 +11,7 @@ import pytest
 
 from shelf_env.privileged import dataset
 
-MODEL = "examples/pretrained/p_s.zip"
+MODEL = "examples/pretrained/v1/p_s.zip"
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ import pytest
 from shelf_env.evaluation import falls
 from shelf_env.evaluation import protocol as ev
 
-MODEL = "examples/pretrained/p_s.zip"
+MODEL = "examples/pretrained/v1/p_s.zip"
 SEED, N, RUNS = falls.VALIDATION_SEED, 4, 3
 
 

@@ -10,22 +10,24 @@ import pytest
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env.evaluation import protocol as ev
-from shelf_env.training.ship import MAX_MB, MODELS
+from shelf_env.training.ship import DISTILLED, DISTILLED_REPORT, MAX_MB, MODELS
 
 PRETRAINED = pathlib.Path(__file__).resolve().parents[1] / "examples" / "pretrained"
-SHIPPED = sorted(PRETRAINED.glob("*.zip"))
+SHIPPED = sorted(PRETRAINED.rglob("*.zip"))
 
 
 def test_what_is_shipped_is_known_and_carded():
     assert SHIPPED, "no model shipped in examples/pretrained (bash scripts/ship_models.sh)"
-    assert {z.stem for z in SHIPPED} <= set(MODELS)
+    names = {z.relative_to(PRETRAINED).as_posix() for z in SHIPPED}
+    assert names <= set(MODELS.values()) | {DISTILLED}
+    assert (DISTILLED in names) == (PRETRAINED / DISTILLED_REPORT).is_file()  # a distilled P+S ships with its report
     card = (PRETRAINED / "README.md").read_text()
     for zip_path in SHIPPED:
-        assert f"`{zip_path.name}`: PixelDoubleDQN" in card
+        assert f"`{zip_path.relative_to(PRETRAINED).as_posix()}`: PixelDoubleDQN" in card
         assert zip_path.stat().st_size <= MAX_MB * 2**20
 
 
-@pytest.mark.parametrize("zip_path", SHIPPED, ids=[z.stem for z in SHIPPED])
+@pytest.mark.parametrize("zip_path", SHIPPED, ids=[z.relative_to(PRETRAINED).as_posix() for z in SHIPPED])
 def test_shipped_model_loads_alone_and_acts_greedily_within_the_masks(zip_path):
     model = PixelDoubleDQN.load(zip_path)  # no env, no other file
     assert model.curriculum_state["finished"] is not None  # a finished run, not a mid-run checkpoint
@@ -46,7 +48,7 @@ def test_shipped_model_loads_alone_and_acts_greedily_within_the_masks(zip_path):
     env.close()
 
 
-@pytest.mark.parametrize("zip_path", SHIPPED, ids=[z.stem for z in SHIPPED])
+@pytest.mark.parametrize("zip_path", SHIPPED, ids=[z.relative_to(PRETRAINED).as_posix() for z in SHIPPED])
 def test_shipped_model_on_the_wrong_layout_is_refused_by_name(zip_path):
     own = ev.checkpoint_primitives(zip_path)
     other = ("pick",) if "push" in own else ("pick", "push")

@@ -1,4 +1,5 @@
-"""shelf_env.training.ship: only finished runs ship, as loadable zips of their layout, with the model card."""
+"""shelf_env.training.ship: only finished runs and reported distillations ship, as loadable zips of their layout,
+with the model card."""
 
 import json
 import shutil
@@ -24,11 +25,11 @@ def finished_run(tmp_path_factory):
 
 def test_a_finished_run_ships_as_a_loadable_zip_with_its_card(finished_run, tmp_path):
     out = tmp_path / "pretrained"
-    assert ship(None, finished_run, out) == [out / "p_s.zip"]
-    model = PixelDoubleDQN.load(out / "p_s.zip")  # no other file
+    assert ship(None, finished_run, out) == [out / "v1" / "p_s.zip"]  # the RL-trained P+S's place on the shelf
+    model = PixelDoubleDQN.load(out / "v1" / "p_s.zip")  # no other file
     assert model.num_timesteps == 4 and model.curriculum_state["finished"] == 4
     card = (out / "README.md").read_text()
-    assert card.startswith("# `p_s.zip`: PixelDoubleDQN, P+S") and "`bash scripts/train_model.sh p_s`" in card
+    assert card.startswith("# `v1/p_s.zip`: PixelDoubleDQN, P+S") and "`bash scripts/train_model.sh p_s`" in card
     assert "curriculum ended at env step 4" in card
 
 
@@ -55,4 +56,63 @@ def test_unfinished_unknown_or_mismatched_runs_are_refused_and_nothing_is_writte
     assert "has no rows of ['p_s']" in capsys.readouterr().out
     assert main(["p_x", "--training", str(finished_run), "--out", str(out)]) == 2
     assert "unknown models ['p_x']" in capsys.readouterr().out
+    assert not out.exists()
+
+
+def distillation(finished_run, folder, name="p_s_dagger3_avg2", init="examples/pretrained/p_s.zip"):
+    """A distilled model as `shelf_env.training.distill` leaves it: NAME.zip and NAME.distill.json beside it."""
+    folder.mkdir()
+    zip_path = folder / f"{name}.zip"
+    shutil.copy(finished_run / "p_s" / "model.zip", zip_path)
+    val = {"loss": 9.5}
+    report = {"data": "data/teacher", "shards": ["s00_00000.npz", "s00_00001.npz", "s02_00000.npz"],
+              "init": init, "out": f"runs/x/{name}.zip", "train_states": 1234,
+              "train_labels": 20000, "val_states": 300, "epochs": 8, "augment": ["MirrorWidth"], "progress": True,
+              "anchor": 1.0, "margin": 1.0, "teacher_radius": 2, "teacher_temperature": 1.0, "seed": 0,
+              "average_last": 2, "averaged": {"epochs": 2, "val": val}, "seconds": 600.0,
+              "history": [{"epoch": 0, "val": {"loss": 12.0}}, {"epoch": 1, "val": {"loss": 10.0}}]}
+    (folder / f"{name}.distill.json").write_text(json.dumps(report))
+    return zip_path
+
+
+def test_a_distilled_model_ships_as_p_s_with_its_report_and_card_beside_the_runs(finished_run, tmp_path):
+    zip_path = distillation(finished_run, tmp_path / "runs", init=str(tmp_path / "pretrained" / "p_s.zip"))
+    results = tmp_path / "eval"
+    results.mkdir()
+    (results / "results.csv").write_text(
+        "policy,object_set,num_objects,sr_mean,sr_std,ae_mean,mae_mean\n"
+        "p_s_dagger3_avg2,ycb,3,90.0,1.0,1.2,0.9\np_s,ycb,3,80.0,2.0,1.1,0.8\n")
+    out = tmp_path / "pretrained"
+    assert ship(None, finished_run, out, [results], zip_path) == [out / "p_s.zip", out / "v1" / "p_s.zip"]
+    assert (out / "p_s.zip").read_bytes() == zip_path.read_bytes()
+    assert json.loads((out / "p_s.distill.json").read_text())["train_states"] == 1234
+    card = (out / "README.md").read_text()
+    assert card.startswith("# Pretrained models: `p_s.zip`, `v1/p_s.zip`") and "`p_s.zip` is the P+S to use" in card
+    assert "\n## `p_s.zip`: PixelDoubleDQN, P+S (pick-and-place, push-left, push-right), distilled" in card
+    assert "3 shards (s00: 2, s02: 1), 1,234 training states with 20,000 labelled actions" in card
+    # it started from the P+S that was p_s.zip then, v1/p_s.zip now
+    assert f"Started from `{out / 'p_s.zip'}` as it was then (now `{out / 'v1' / 'p_s.zip'}`)" in card
+    assert "its report: `" + str(out / "p_s.distill.json") + "`" in card
+    assert "cross-entropy on the teacher's choice (temperature 1) on its 5 x 5-cell square" in card
+    assert "the mean of the last 2 epochs' weights" in card and "Validation loss 12.00 -> 9.50" in card
+    # each card's table from its own label: the distilled model under its distillation's name, v1 as p_s
+    assert "this model is `p_s_dagger3_avg2` there" in card and "this model is `p_s` there" in card
+    assert "| ycb | 3 | 90.0 ± 1.0 | 80.0 ± 2.0 | 1.20 | 0.90 |" in card
+    assert "\n## `v1/p_s.zip`: PixelDoubleDQN, P+S" in card
+    # shipping a run again keeps the distilled model's card: its report is on the shelf
+    ship(["p_s"], finished_run, out)
+    assert "distilled" in (out / "README.md").read_text()
+
+
+def test_a_distilled_model_without_its_report_or_of_another_layout_is_refused(finished_run, tmp_path, capsys):
+    zip_path = distillation(finished_run, tmp_path / "runs")
+    out = tmp_path / "pretrained"
+    zip_path.with_name(zip_path.stem + ".distill.json").unlink()
+    assert main(["--training", str(finished_run), "--out", str(out), "--distilled", str(zip_path)]) == 2
+    assert "has no distillation report beside it (p_s_dagger3_avg2.distill.json)" in capsys.readouterr().out
+    # a report beside something that is not a checkpoint: the load check refuses it
+    zip_path.write_bytes(b"not a zip")
+    zip_path.with_name(zip_path.stem + ".distill.json").write_text("{}")
+    assert main(["--training", str(finished_run), "--out", str(out), "--distilled", str(zip_path)]) == 2
+    assert "ship: error:" in capsys.readouterr().out
     assert not out.exists()

@@ -26,7 +26,7 @@ bash scripts/setup.sh >/dev/null
 grid=(--ns 3-14 --runs 30 --object-sets ycb)
 reuse=()
 [ -d results/models/cells ] && reuse=(--reuse-cells results/models)
-ps=examples/pretrained/p_s.zip
+ps=examples/pretrained/v1/p_s.zip
 ps_seeds=${PS_SEEDS:-3}
 name=${NAME:-on_deeper}
 loop=(--closed-loop "${WATCH:-"{}"}")

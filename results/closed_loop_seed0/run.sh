@@ -26,10 +26,10 @@ for out in off "$name"; do
       --out "results/closed_loop_seed0/$out" "$@"
   policies=(h-a h-d)
   # the shipped P+S model where it exists (N = 5, 8, 11: an episode of it costs ~4x a heuristic's)
-  if [ "${PS:-1}" = 1 ] && [ -f examples/pretrained/p_s.zip ]; then
-    shelf-evaluate --policies examples/pretrained/p_s.zip --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb \
+  if [ "${PS:-1}" = 1 ] && [ -f examples/pretrained/v1/p_s.zip ]; then
+    shelf-evaluate --policies examples/pretrained/v1/p_s.zip --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb \
         "${loop[@]}" --out "results/closed_loop_seed0/$out" "$@"
-    policies+=(examples/pretrained/p_s.zip)
+    policies+=(examples/pretrained/v1/p_s.zip)
   fi
   # one summary (results.json, results.csv) of every cell in the folder
   shelf-evaluate --policies "${policies[@]}" --ns 3,5,8,11,14 --runs 30 --seeds 1 --object-sets ycb \

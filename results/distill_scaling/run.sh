@@ -20,7 +20,7 @@ distil() {  # NAME STATES OPTIONS...: STATES "all" or a number of training state
   [ "$states" != all ] && extra=(--max-states "$states")
   if [ ! -f "$M/$name.zip" ]; then
     "$PY" -m shelf_env.training.distill --data data/teacher --max-shards "${SHARDS:-35}" "${extra[@]}" \
-      --init examples/pretrained/p_s.zip --out "$M/$name.zip" --epochs 8 --val-fraction 0.2 "$@"
+      --init examples/pretrained/v1/p_s.zip --out "$M/$name.zip" --epochs 8 --val-fraction 0.2 "$@"
   fi
   cp "$M/$name.distill.json" "$DIR/$name.distill.json"
 }
@@ -98,7 +98,7 @@ if [ ! -f "$M/p_s_dall_aug_m_ft45.zip" ]; then
   cp runs/distill_finetune/model.zip "$M/p_s_dall_aug_m_ft45.zip"
 fi
 
-ps=examples/pretrained/p_s.zip
+ps=examples/pretrained/v1/p_s.zip
 "$PY" -m shelf_env.evaluation.falls "$ps" "$M/p_s_dall_aug_m_ft45.zip" "$M/p_s_dall_aug_mpa.zip" \
   "$M/p_s_dall_aug_mpa.zip+loop-breaker" "$ps+loop-breaker" "$M/p_s_d440_aug_mpa.zip" "$M/p_s_d220_aug_mpa.zip" \
   "$M/p_s_dall_aug_mp.zip" "$M/p_s_dall_aug_mp.zip+loop-breaker" "$M/p_s_d440_aug_mp.zip" "$M/p_s_d220_aug_mp.zip" \

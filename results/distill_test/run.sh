@@ -8,7 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 [ -f runs/distill_scaling/p_s_dall_aug_mpa.zip ] || bash results/distill_scaling/run.sh
 d=runs/distill_scaling/p_s_dall_aug_mpa.zip
-ps=examples/pretrained/p_s.zip
+ps=examples/pretrained/v1/p_s.zip
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
   --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --reuse-cells results/models "$@"
 # the greedy action's invalid actions per action on the first 10 of those scenes at N = 8, each action tried

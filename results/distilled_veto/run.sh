@@ -31,7 +31,7 @@ for pair in "${pairs[@]}"; do
     --out $out/falls_validation.json
 done
 chosen=$V/p_s_vmpa_d025.zip
-$PY -m research.evaluate --policies "$chosen+veto" examples/pretrained/p_s.zip examples/pretrained/s.zip h-d h-a \
+$PY -m research.evaluate --policies "$chosen+veto" examples/pretrained/v1/p_s.zip examples/pretrained/s.zip h-d h-a \
   --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out $out --reuse-cells results/models --workers 1
 $PY -m research.distilled_veto falls "$chosen+veto" --ns 8 --runs 10 --seed 0 --out $out/falls_test.json
 $PY -m shelf_env.evaluation.report $out --learned p_s_vmpa_d025+veto --pick-only s --heuristics h-d h-a

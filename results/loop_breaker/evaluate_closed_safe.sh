@@ -13,7 +13,7 @@ if [ $# -ne 2 ] || [ ! -f "$1" ]; then
 fi
 . .venv/bin/activate
 zip=$1 out=$2 name=$(basename "$1" .zip)
-ps=examples/pretrained/p_s.zip
+ps=examples/pretrained/v1/p_s.zip
 shelf-evaluate --policies "$zip+loop-breaker" "$ps+loop-breaker" "$ps" h-a h-a+loop-breaker h-d h-d+loop-breaker \
     --ns 3-14 --runs 30 --seeds 2 --object-sets ycb --closed-loop '{}' --safe-picks --out "$out" \
     --reuse-cells results/loop_breaker/closed_safe --workers 2

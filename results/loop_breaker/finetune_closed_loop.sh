@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Fine-tune the shipped P+S model past its training N under issue 13's recommended setting (closed
-# loop with the watch's defaults, safe picks): a new run from examples/pretrained/p_s.zip's weights
+# loop with the watch's defaults, safe picks): a new run from examples/pretrained/v1/p_s.zip's weights
 # (shelf-train --init-from), curriculum N = 9 -> 13 on the training objects with 2000 env steps per
 # stage (the 90 % greedy gate is out of reach there, so the cap promotes), 400 H-a demonstration
 # steps at N = 9, 11, 13 under the same setting, a quarter of each batch from them, exploration
@@ -15,7 +15,7 @@ cd "$(dirname "$0")/../.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
 shelf-train --out runs/p_s_closed --mirror results/training/p_s_closed --preset p_s --seed 0 --threads 2 \
-    --actor --init-from examples/pretrained/p_s.zip --set safe_picks=true --set closed_loop=true \
+    --actor --init-from examples/pretrained/v1/p_s.zip --set safe_picks=true --set closed_loop=true \
     --start-objects 9 --max-objects 13 --max-stage-timesteps 2000 --set exploration_initial_eps=0.1 \
     --set 'demo_objects=[9,11,13]' --set demo_fraction=0.25 --set eval_every=2500 --set eval_episodes=10 \
     --checkpoint-minutes 10 --hours 1.1 "$@"

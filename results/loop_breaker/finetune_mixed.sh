@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Fine-tune the shipped P+S model on a mix of sizes under issue 13's recommended setting (closed
-# loop with the watch's defaults, safe picks): a new run from examples/pretrained/p_s.zip's weights
+# loop with the watch's defaults, safe picks): a new run from examples/pretrained/v1/p_s.zip's weights
 # (shelf-train --init-from) in which every training episode draws its N uniformly from 3..13
 # (TrainConfig.min_num_objects = 3 under one curriculum stage N = 13), so that training past N = 8
 # does not forget the low N as the staged fine-tune (results/loop_breaker/finetune_closed_loop.sh) did. 400 H-a
@@ -23,7 +23,7 @@
 set -euo pipefail
 suffix=${SUFFIX:-}
 run=${RUN-p_s_mixed}
-init=${INIT:-examples/pretrained/p_s.zip}
+init=${INIT:-examples/pretrained/v1/p_s.zip}
 for name in "$suffix" "$run"; do
     case $name in *[!A-Za-z0-9_-]*) echo "SUFFIX and RUN may hold only letters, digits, _ and - (got: $name)" >&2; exit 2;; esac
 done

@@ -16,7 +16,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
-ps=examples/pretrained/p_s.zip
+ps=examples/pretrained/v1/p_s.zip
 out=results/loop_breaker/closed_safe
 policies=("$ps+loop-breaker" "$ps" h-a h-a+loop-breaker h-d h-d+loop-breaker)
 shelf-evaluate --policies "${policies[@]}" --ns 3-14 --runs 30 --seeds 2 --object-sets ycb \

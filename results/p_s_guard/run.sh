@@ -12,4 +12,4 @@ bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
 cp results/training/p_s_guard/model.zip results/training/p_s_guard.zip
 shelf-evaluate --policies results/training/p_s_guard.zip results/training/p_s_la.zip results/training/p_s_long.zip \
-    examples/pretrained/p_s.zip h-d h-a --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/p_s_guard "$@"
+    examples/pretrained/v1/p_s.zip h-d h-a --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/p_s_guard "$@"

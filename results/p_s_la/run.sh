@@ -7,5 +7,5 @@
 # (30 runs each, YCB objects): results/p_s_la. The other policies' cells are copied from
 # results/p_s_long (the same scenes). Extra arguments go to shelf-evaluate.
 exec bash "$(dirname "$0")/../../research/evaluate_run.sh" p_s_la --policies results/training/p_s_la.zip \
-    results/training/p_s_la_step5000.zip results/training/p_s_long.zip examples/pretrained/p_s.zip h-d h-a \
+    results/training/p_s_la_step5000.zip results/training/p_s_long.zip examples/pretrained/v1/p_s.zip h-d h-a \
     --reuse-cells results/p_s_long "$@"

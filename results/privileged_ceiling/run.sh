@@ -20,7 +20,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 mode=${1:-closed_safe}
 [ $# -gt 0 ] && shift
-ps=examples/pretrained/p_s.zip
+ps=examples/pretrained/v1/p_s.zip
 la=h-d-lookahead+loop-breaker
 case $mode in
 closed_safe)

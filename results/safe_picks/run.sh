@@ -8,7 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
-policies=(examples/pretrained/p_s.zip examples/pretrained/s.zip h-d h-a)
+policies=(examples/pretrained/v1/p_s.zip examples/pretrained/s.zip h-d h-a)
 grid=(--ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb)
 shelf-evaluate --policies "${policies[@]}" "${grid[@]}" --out results/safe_picks/off \
     --reuse-cells results/models "$@"

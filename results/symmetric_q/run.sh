@@ -20,7 +20,7 @@ for policy in $D $D+symmetric $FT; do
   "$PY" -c "$FALLS" $policy --ns 8 --runs 30 --seed 0 --out $OUT/falls.json
 done
 # +symmetric on the held-out grid; the plain model, its fine-tune, P+S, the heuristics: cells of results/distill_test
-"$PY" -m research.evaluate --policies h-d h-a examples/pretrained/p_s.zip $D $D+symmetric $FT --ns 5,8,11 \
+"$PY" -m research.evaluate --policies h-d h-a examples/pretrained/v1/p_s.zip $D $D+symmetric $FT --ns 5,8,11 \
   --runs 30 --seeds 3 --object-sets ycb --out $OUT --reuse-cells results/distill_test "$@"
 # the table: falls per action at N = 8 (first 30 scenes of seed 0), SR and the paired margin over the better heuristic
 "$PY" research/scaling_curve.py $OUT --reports results/distill_scaling --evaluation $OUT --out $OUT/table.md

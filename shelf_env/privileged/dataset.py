@@ -431,7 +431,7 @@ def transitions(shards: Sequence[Shard], invalid_reward: float = params.REWARD_I
 
 
 def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence[int] = DEFAULT_NS,
-            model_path: str | None = "examples/pretrained/p_s.zip", episodes_per_shard: int = 2,
+            model_path: str | None = "examples/pretrained/v1/p_s.zip", episodes_per_shard: int = 2,
             max_shards: int | None = None, explore: float = 0.3, max_probes: int = 24,
             object_set: str = "train", teacher: str = "h-d-lookahead") -> int:
     """Collect shards of series ``series`` into ``out`` until ``hours`` of wall clock have passed (a shard
@@ -538,7 +538,7 @@ def main(argv: list[str] | None = None) -> int:
                    "16-core machine)")
     c.add_argument("--series", type=int, default=0, help="first shard series (worker k uses series + k)")
     c.add_argument("--ns", type=int, nargs="+", default=list(DEFAULT_NS), help="numbers of objects to draw from")
-    c.add_argument("--model", default="examples/pretrained/p_s.zip", help="driving model whose greedy action is "
+    c.add_argument("--model", default="examples/pretrained/v1/p_s.zip", help="driving model whose greedy action is "
                    "labelled first ('none' for the teacher alone)")
     c.add_argument("--episodes-per-shard", type=int, default=2, help="whole episodes per shard file")
     c.add_argument("--max-shards", type=int, default=None, help="stop once each series holds this many shards")

@@ -1,6 +1,6 @@
 """Distil the teacher dataset into a P+S model's Q-maps (`sb3_pixeldqn.distill`), then fine-tune as usual.
 
-    python -m shelf_env.training.distill --data data/teacher --init examples/pretrained/p_s.zip \\
+    python -m shelf_env.training.distill --data data/teacher --init examples/pretrained/v1/p_s.zip \\
         --out runs/distilled.zip --epochs 10 [--max-states 10000]
 
 The dataset's scenes are split by scene (every state of a held-out scene is held out): the last
@@ -187,7 +187,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m shelf_env.training.distill", description=__doc__.split("\n")[0])
     p.add_argument("--data", type=pathlib.Path, default=pathlib.Path("data/teacher"), help="the dataset folder")
-    p.add_argument("--init", default="examples/pretrained/p_s.zip", help="the P+S zip whose Q-maps are trained")
+    p.add_argument("--init", default="examples/pretrained/v1/p_s.zip", help="the P+S zip whose Q-maps are trained")
     p.add_argument("--out", type=pathlib.Path, required=True, help="the distilled model (an SB3 zip)")
     p.add_argument("--epochs", type=int, default=10, help="passes over the training states")
     p.add_argument("--val-fraction", type=float, default=0.2, help="share of the scenes held out for validation")

@@ -1,9 +1,9 @@
 """Model cards for shipped checkpoints, written from what the run and the evaluation left on disk.
 
-    python -m shelf_env.training.model_card results/training/p_s --zip examples/pretrained/p_s.zip \\
+    python -m shelf_env.training.model_card results/training/p_s --zip examples/pretrained/v1/p_s.zip \\
         --results results/models --command "bash scripts/train_model.sh p_s" --out examples/pretrained/p_s.md
     python -m shelf_env.training.model_card results/training/p_s results/training/s \\
-        --zip examples/pretrained/p_s.zip examples/pretrained/s.zip --command "..." "..." \\
+        --zip examples/pretrained/v1/p_s.zip examples/pretrained/s.zip --command "..." "..." \\
         --results results/models --out examples/pretrained/README.md     # both cards in one file
 
 Reads the run's ``progress.json`` (configuration, steps, wall time, the sessions with their
@@ -11,6 +11,10 @@ machines, the curriculum's stages and greedy checks) and ``episodes.csv`` (when 
 reached in wall-clock time), and the evaluation's ``results.csv``. It writes markdown: how to load
 the model, the command, the training (steps, wall time, hardware, stages reached and when) and the
 evaluation table of the model beside every other policy evaluated on the same scenes.
+
+A distilled model (``python -m shelf_env.training.distill``) has no run: `distilled_card` writes its card
+from the distillation's report (``<model>.distill.json``: the model it started from, the dataset's shards
+and states, the recipe, the epochs, the validation losses).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import pathlib
 from typing import Any
 
 from shelf_env.files import write_text_atomically
+from shelf_env.policies import checkpoint_pixel_size, checkpoint_primitives
 
 
 def stage_times(run: pathlib.Path, history: list[list[int]]) -> list[tuple[int, int, float | None]]:
@@ -61,26 +66,47 @@ def evaluation_table(results: pathlib.Path, label: str) -> str:
     return "\n".join(lines)
 
 
-def model_card(run: pathlib.Path, zip_path: pathlib.Path, results: pathlib.Path | None, command: str) -> str:
-    """The markdown card of the model trained in ``run`` and shipped as ``zip_path``."""
+def layout_name(primitives: tuple[str, ...]) -> str:
+    """The paper's name of a layout: P+S with pushes, S with picks only."""
+    return "P+S (pick-and-place, push-left, push-right)" if "push" in primitives else "S (pick-and-place)"
+
+
+def usage(zip_path: pathlib.Path, title: str | None, how: str, pixel_size: float,
+          primitives: tuple[str, ...]) -> list[str]:
+    """A card's first lines: its title (``title``, default the file's name), how to load and play the model."""
+    size_mb = zip_path.stat().st_size / 2**20 if zip_path.exists() else float("nan")
+    return [f"# `{title or zip_path.name}`: PixelDoubleDQN, {how}", "",
+            "```python",
+            "from sb3_pixeldqn import PixelDoubleDQN",
+            f'model = PixelDoubleDQN.load("{zip_path.as_posix()}")   # {size_mb:.1f} MB, no other file needed',
+            "```", "",
+            f"Observation {pixel_size * 1000:g} mm cells (`gym.make(\"ShelfSort-v0\", pixel_size={pixel_size}, "
+            f"primitives={primitives})`); act greedily within the env's masks: "
+            "`model.predict(obs, deterministic=True, action_masks=env.unwrapped.action_masks())`.", ""]
+
+
+def evaluation_section(results: pathlib.Path, label: str) -> list[str]:
+    """The card's evaluation: ``label``'s rows of ``results`` beside every other policy on the same scenes."""
+    return ["", "## Evaluation", "",
+            f"Greedy, masked, on held-out scenes (`{results.as_posix()}/results.csv`; the same scenes for "
+            f"every policy; this model is `{label}` there): success rate mean ± std over seeds, and this model's "
+            "AE and mAE.", "",
+            evaluation_table(results, label)]
+
+
+def model_card(run: pathlib.Path, zip_path: pathlib.Path, results: pathlib.Path | None, command: str,
+               title: str | None = None) -> str:
+    """The markdown card of the model trained in ``run`` and shipped as ``zip_path`` (headed ``title``)."""
     progress: dict[str, Any] = json.loads((run / "progress.json").read_text())
     config = progress["config"]
-    layout = "P+S (pick-and-place, push-left, push-right)" if "push" in config["primitives"] else "S (pick-and-place)"
+    layout = layout_name(tuple(config["primitives"]))
     curriculum = progress.get("curriculum") or {}
     stages = stage_times(run, curriculum.get("history", []))
     greedy = curriculum.get("greedy_history", [])
     sessions = progress.get("sessions", [])
     machines = sorted({f"{s['machine']}, {s['torch_threads']} torch threads, {s['device']}"
                        + (f", {s['n_envs']} env processes" if s.get("n_envs", 1) > 1 else "") for s in sessions})
-    size_mb = zip_path.stat().st_size / 2**20 if zip_path.exists() else float("nan")
-    out = [f"# `{zip_path.name}`: PixelDoubleDQN, {layout}", "",
-           "```python",
-           "from sb3_pixeldqn import PixelDoubleDQN",
-           f'model = PixelDoubleDQN.load("{zip_path.as_posix()}")   # {size_mb:.1f} MB, no other file needed',
-           "```", "",
-           f"Observation {config['pixel_size'] * 1000:g} mm cells (`gym.make(\"ShelfSort-v0\", "
-           f"pixel_size={config['pixel_size']}, primitives={tuple(config['primitives'])})`); act greedily within "
-           "the env's masks: `model.predict(obs, deterministic=True, action_masks=env.unwrapped.action_masks())`.", "",
+    out = [*usage(zip_path, title, layout, config["pixel_size"], tuple(config["primitives"])),
            "## Training", "",
            f"- Command: `{command}` (resumable; `{run.as_posix()}` holds its progress, episodes and TensorBoard logs).",
            "- Preset: the learning recipe (docs/experiments/learning-recipe.md), curriculum "
@@ -107,24 +133,78 @@ def model_card(run: pathlib.Path, zip_path: pathlib.Path, results: pathlib.Path 
         step, n, rate = greedy[-1]
         out += ["", f"Last greedy check (20 fresh scenes): {100 * rate:.0f} % at N = {int(n)}, step {int(step)}."]
     if results is not None:
-        label = zip_path.stem
-        out += ["", "## Evaluation", "",
-                f"Greedy, masked, on held-out scenes (`{results.as_posix()}/results.csv`; the same scenes for "
-                "every policy): success rate mean ± std over seeds, and this model's AE and mAE.", "",
-                evaluation_table(results, label)]
+        out += evaluation_section(results, zip_path.stem)
     return "\n".join(out) + "\n"
 
 
-def model_cards(models: list[tuple[pathlib.Path, pathlib.Path, str]], results: pathlib.Path | None) -> str:
-    """One model's card, or several under one title (``examples/pretrained/README.md``), headings one level down."""
-    cards = [model_card(run, zip_path, results, command) for run, zip_path, command in models]
+def recipe_terms(report: dict[str, Any]) -> list[str]:
+    """The distillation's loss terms and options as its report records them, in words."""
+    side = 2 * int(report.get("teacher_radius") or 0) + 1
+    square = f" on its {side} x {side}-cell square" if side > 1 else ""
+    temperature = report.get("teacher_temperature")
+    terms = ["a value and a ranking term on every labelled action's outcome",
+             (f"a cross-entropy on the teacher's choice (temperature {temperature:g}){square}" if temperature
+              else f"a margin {report.get('margin', 1.0):g} on the teacher's choice{square}")]
+    if report.get("progress"):
+        terms.append("the progress term")
+    if report.get("anchor"):
+        terms.append(f"the anchor to the starting model (weight {report['anchor']:g})")
+    terms.append("augmentation " + ("on" if report.get("augment") else "off"))
+    return terms
+
+
+def distilled_card(report_path: pathlib.Path, zip_path: pathlib.Path, results: pathlib.Path | None, command: str,
+                   title: str | None = None, moved: dict[str, str] | None = None) -> str:
+    """The card of a model distilled from the teacher dataset, from its distillation report.
+
+    Its evaluation rows are those of the label it was evaluated under: the file stem the distillation wrote
+    (the report's ``out``), the same bytes as ``zip_path``. ``moved`` maps a starting model's path as the
+    report names it to where that file is now.
+    """
+    report: dict[str, Any] = json.loads(report_path.read_text())
+    primitives = checkpoint_primitives(zip_path)
+    series: dict[str, int] = {}
+    for shard in report["shards"]:
+        series[shard.split("_")[0]] = series.get(shard.split("_")[0], 0) + 1
+    val = (report.get("averaged") or {}).get("val") or report["history"][-1]["val"]
+    first = report["history"][0]["val"]
+    averaged = (f"the mean of the last {report['average_last']} epochs' weights"
+                if report.get("average_last") else "the last epoch's weights")
+    init = f"`{report['init']}`"
+    now = (moved or {}).get(report["init"])
+    if now:
+        init += f" as it was then (now `{now}`)"
+    name = pathlib.Path(report["out"]).name
+    out = [*usage(zip_path, title, f"{layout_name(primitives)}, distilled", checkpoint_pixel_size(zip_path),
+                  primitives),
+           "## Distillation", "",
+           f"- Command: `{command}`, its line that writes `{name}` (`python -m shelf_env.training.distill`; "
+           f"its report: `{report_path.as_posix()}`).",
+           f"- Started from {init} and trained its Q-maps on "
+           f"the teacher dataset `{report['data']}` (docs/experiments/teacher-dataset.md): "
+           f"{len(report['shards'])} shards (" + ", ".join(f"{k}: {v}" for k, v in sorted(series.items()))
+           + f"), {report['train_states']:,} training states with {report['train_labels']:,} labelled actions, "
+           f"{report['val_states']:,} validation states.",
+           f"- Recipe (docs/experiments/distill-scaling.md): {report['epochs']} epochs, seed {report['seed']}; "
+           + "; ".join(recipe_terms(report)) + f"; shipped weights: {averaged}.",
+           f"- Validation loss {first['loss']:.2f} -> {val['loss']:.2f}; {report['seconds'] / 60:.1f} min on one "
+           "CPU thread."]
+    if results is not None:
+        out += evaluation_section(results, pathlib.Path(report["out"]).stem)
+    return "\n".join(out) + "\n"
+
+
+def model_cards(cards: list[tuple[str, str]], head: str = "") -> str:
+    """One card, or several ``(name, card)`` under one title (``examples/pretrained/README.md``), their
+    headings one level down, after ``head``."""
     if len(cards) == 1:
-        return cards[0]
-    names = ", ".join(f"`{zip_path.name}`" for _, zip_path, _ in models)
-    head = (f"# Pretrained models: {names}\n\nEach was trained by the command in its card, on the machines listed, "
-            "and copied here with `bash scripts/ship_models.sh` (which also writes this file).\n")
-    return "\n".join([head, *("\n".join("#" + line if line.startswith("#") else line for line in card.splitlines())
-                               + "\n" for card in cards)])
+        return cards[0][1]
+    names = ", ".join(f"`{name}`" for name, _ in cards)
+    head = head or ("Each was trained by the command in its card, on the machines listed, and copied here with "
+                    "`bash scripts/ship_models.sh` (which also writes this file).")
+    return "\n".join([f"# Pretrained models: {names}\n\n{head}\n",
+                      *("\n".join("#" + line if line.startswith("#") else line for line in card.splitlines())
+                        + "\n" for _, card in cards)])
 
 
 PROG = "python -m shelf_env.training.model_card"
@@ -143,7 +223,8 @@ def main(argv: list[str] | None = None) -> int:
         if not len(args.run) == len(args.zip) == len(commands):
             raise ValueError(f"need one --zip and one --command per run: {len(args.run)} runs, {len(args.zip)} "
                              f"zips, {len(commands) if args.command is not None else 'no'} commands")
-        text = model_cards(list(zip(args.run, args.zip, commands)), args.results)
+        text = model_cards([(z.name, model_card(run, z, args.results, command))
+                            for run, z, command in zip(args.run, args.zip, commands)])
     except (OSError, KeyError, ValueError) as err:
         print(f"model_card: error: {err}", flush=True)
         return 2

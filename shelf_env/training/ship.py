@@ -1,16 +1,25 @@
-"""Ship the trained models: ``examples/pretrained/<model>.zip`` and their card, from the committed runs.
+"""Ship the models: ``examples/pretrained/`` and its card, from the committed runs and a distillation.
 
-    python -m shelf_env.training.ship                     # every model whose run is over (p_s, s)
-    python -m shelf_env.training.ship p_s --results results/models
-    bash scripts/ship_models.sh                  # the same, with the evaluation when there is one
+    python -m shelf_env.training.ship                     # every model whose run is over (s, v1/p_s)
+    python -m shelf_env.training.ship --distilled runs/distill_scaling/NAME.zip \\
+        --results results/models_v2 results/models    # a distilled P+S as p_s.zip, the cards' tables
+    bash scripts/ship_models.sh                  # the same, with the evaluations when there are some
 
-A model ships once its run's curriculum is over (``finished`` in ``results/training/<model>/
-progress.json``: the last stage has trained its ``max_stage_timesteps``), never mid-run; a model
-named on the command line whose run is not over is refused by name, and nothing is written. Each
-zip is the run's final checkpoint, checked before it is copied (atomically): at most ``MAX_MB``,
-loadable with ``PixelDoubleDQN.load(path)`` and no other file, and of the model's layout (P+S: pick
-and both pushes; S: pick only). The card, ``README.md`` beside the zips, covers every shipped
-model (`shelf_env.training.model_card.model_cards`), with the evaluation table when ``--results`` is given.
+The shelf holds the P+S to use, ``p_s.zip``: since 2026-12-04 a P+S distilled from the teacher dataset
+(``python -m shelf_env.training.distill``) with its report beside it (``p_s.distill.json``); ``s.zip``,
+the pick-only S trained with PixelDoubleDQN; and ``v1/p_s.zip``, the P+S trained with PixelDoubleDQN
+that was ``p_s.zip`` until then (the model every result before that date calls ``p_s``, and the one the
+distillation started from).
+
+A run ships once its curriculum is over (``finished`` in ``results/training/<model>/progress.json``: the
+last stage has trained its ``max_stage_timesteps``), never mid-run; a model named on the command line
+whose run is not over is refused by name, and nothing is written. A distilled model ships with the
+report its distillation wrote beside it (``NAME.distill.json``); without one it is refused. Each zip is
+checked before it is copied (atomically): at most ``MAX_MB``, loadable with ``PixelDoubleDQN.load(path)``
+and no other file, and of the model's layout (P+S: pick and both pushes; S: pick only). The card,
+``README.md`` on the shelf, covers every shipped model (`shelf_env.training.model_card`), each with its
+evaluation table from the first ``--results`` folder that evaluated it (a distilled model under the name
+its distillation gave it).
 """
 
 from __future__ import annotations
@@ -24,12 +33,20 @@ from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env.evaluation.protocol import checkpoint_primitives
 from shelf_env.files import copy_atomically, write_text_atomically
 from shelf_env.training.config import PRESETS
-from shelf_env.training.model_card import model_cards
+from shelf_env.training.model_card import distilled_card, model_card, model_cards
 
-#: The shipped models, by the name of their preset and run (the preset gives the layout's primitives).
-MODELS = ("p_s", "s")
+#: The runs that ship, by the name of their preset and run (the preset gives the layout's primitives), and
+#: where each goes on the shelf: the RL-trained P+S was ``p_s.zip`` until the distilled one replaced it.
+MODELS = {"p_s": "v1/p_s.zip", "s": "s.zip"}
+#: Where a distilled P+S goes, and its distillation report beside it (what its card is written from).
+DISTILLED, DISTILLED_REPORT = "p_s.zip", "p_s.distill.json"
 MAX_MB = 20.0
 COMMAND = "bash scripts/train_model.sh {model}"
+DISTILL_COMMAND = "bash results/distill_scaling/run.sh"
+HEAD = ("`p_s.zip` is the P+S to use: distilled from the teacher dataset into the Q-maps of `v1/p_s.zip`, the P+S "
+        "trained with PixelDoubleDQN that was `p_s.zip` until 2026-12-04 (every result before that date calls it "
+        "`p_s`). Each model was made by the command in its card and copied here with `bash scripts/ship_models.sh` "
+        "(which also writes this file).")
 
 
 def run_is_over(run: pathlib.Path) -> bool:
@@ -49,11 +66,27 @@ def check_checkpoint(path: pathlib.Path, model: str) -> None:
         raise ValueError(f"{path} has the maps {loaded.policy.maps}, not those of {model!r} (primitives {expected})")
 
 
-def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
-         results: pathlib.Path | None = None) -> list[pathlib.Path]:
-    """Copy the finished runs' checkpoints to ``out`` and write the card; returns the zips shipped now.
+def report_of(zip_path: pathlib.Path) -> pathlib.Path:
+    """The distillation report written beside ``zip_path`` (``NAME.distill.json``)."""
+    return zip_path.with_name(zip_path.stem + ".distill.json")
 
-    ``models`` None ships every model whose run is over; named models must be over.
+
+def results_with(folders: list[pathlib.Path], label: str) -> pathlib.Path:
+    """The first of ``folders`` whose ``results.csv`` has rows of ``label``; a ValueError naming them if none."""
+    for folder in folders:
+        with open(folder / "results.csv", newline="") as f:
+            if any(row["policy"] == label for row in csv.DictReader(f)):
+                return folder
+    raise ValueError(f"{', '.join(str(f / 'results.csv') for f in folders)} has no rows of [{label!r}]; "
+                     "evaluate it or leave out --results")
+
+
+def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
+         results: list[pathlib.Path] | None = None, distilled: pathlib.Path | None = None) -> list[pathlib.Path]:
+    """Copy the finished runs' checkpoints (and ``distilled``) to ``out`` and write the card; returns the zips
+    shipped now.
+
+    ``models`` None ships every run that is over; named models must be over.
     """
     unknown = sorted(set(models or []) - set(MODELS))
     if unknown:
@@ -69,17 +102,30 @@ def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
             raise ValueError(f"the {model!r} run in {run} is not over (its curriculum has no 'finished'); "
                              f"go on with {COMMAND.format(model=model)}")
         check_checkpoint(run / "model.zip", model)
-    on_shelf = [m for m in MODELS if m in models or (out / f"{m}.zip").exists()]
-    if results is not None:  # checked before anything is written: the card needs every shipped model's rows
-        with open(results / "results.csv", newline="") as f:
-            evaluated = {row["policy"] for row in csv.DictReader(f)}
-        missing = [m for m in on_shelf if m not in evaluated]
-        if missing:
-            raise ValueError(f"{results}/results.csv has no rows of {missing}; evaluate them or leave out --results")
-    shipped = [copy_atomically(training / m / "model.zip", out / f"{m}.zip") for m in models]
-    if on_shelf:
-        cards = model_cards([(training / m, out / f"{m}.zip", COMMAND.format(model=m)) for m in on_shelf], results)
-        write_text_atomically(out / "README.md", cards)
+    if distilled is not None:
+        if not report_of(distilled).is_file():
+            raise ValueError(f"{distilled} has no distillation report beside it ({report_of(distilled).name}): "
+                             "ship what python -m shelf_env.training.distill wrote")
+        check_checkpoint(distilled, "p_s")
+    report = report_of(distilled) if distilled is not None else out / DISTILLED_REPORT
+    cards: list[tuple[str, pathlib.Path, str | None]] = []  # (name on the shelf, model, its label in results)
+    if report.is_file():  # its card is written from the report's copy on the shelf
+        cards.append((DISTILLED, out / DISTILLED_REPORT, pathlib.Path(json.loads(report.read_text())["out"]).stem))
+    cards += [(MODELS[m], training / m, None) for m in MODELS if m in models or (out / MODELS[m]).exists()]
+    labels = [label or pathlib.Path(name).stem for name, _, label in cards]
+    # checked before anything is written: the card needs every shipped model's rows
+    folders = [results_with(results, label) for label in labels] if results else [None] * len(cards)
+    shipped = [copy_atomically(training / m / "model.zip", out / MODELS[m]) for m in models]
+    if distilled is not None:
+        copy_atomically(report_of(distilled), out / DISTILLED_REPORT)
+        shipped.insert(0, copy_atomically(distilled, out / DISTILLED))
+    if cards:
+        moved = {(out / DISTILLED).as_posix(): (out / MODELS["p_s"]).as_posix()}  # the RL P+S's place until 2026-12-04
+        texts = [(name, distilled_card(out / DISTILLED_REPORT, out / name, folder, DISTILL_COMMAND, name, moved)
+                  if name == DISTILLED else model_card(source, out / name, folder, COMMAND.format(model=source.name),
+                                                       name))
+                 for (name, source, _), label, folder in zip(cards, labels, folders)]
+        write_text_atomically(out / "README.md", model_cards(texts, HEAD if cards[0][0] == DISTILLED else ""))
     return shipped
 
 
@@ -88,15 +134,18 @@ PROG = "python -m shelf_env.training.ship"
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("models", nargs="*", help=f"models to ship, of {list(MODELS)} (default: every run that is over)")
+    p.add_argument("models", nargs="*", help=f"runs to ship, of {list(MODELS)} (default: every run that is over)")
+    p.add_argument("--distilled", type=pathlib.Path, default=None,
+                   help=f"a distilled P+S to ship as {DISTILLED} (its NAME.distill.json beside it)")
     p.add_argument("--training", type=pathlib.Path, default=pathlib.Path("results/training"),
                    help="where the runs' committed mirrors are")
     p.add_argument("--out", type=pathlib.Path, default=pathlib.Path("examples/pretrained"),
                    help="where the shipped zips and their card go")
-    p.add_argument("--results", type=pathlib.Path, default=None, help="an evaluation of the shipped models")
+    p.add_argument("--results", type=pathlib.Path, nargs="+", default=None,
+                   help="evaluations of the shipped models (each card's table: the first that has the model)")
     args = p.parse_args(argv)
     try:
-        shipped = ship(args.models or None, args.training, args.out, args.results)
+        shipped = ship(args.models or None, args.training, args.out, args.results, args.distilled)
     except (OSError, KeyError, ValueError) as err:
         print(f"ship: error: {err}", flush=True)
         return 2
