@@ -119,12 +119,14 @@ def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
     if distilled is not None:
         copy_atomically(report_of(distilled), out / DISTILLED_REPORT)
         shipped.insert(0, copy_atomically(distilled, out / DISTILLED))
-    if cards:
-        moved = {(out / DISTILLED).as_posix(): (out / MODELS["p_s"]).as_posix()}  # the RL P+S's place until 2026-12-04
-        texts = [(name, distilled_card(out / DISTILLED_REPORT, out / name, folder, DISTILL_COMMAND, name, moved)
-                  if name == DISTILLED else model_card(source, out / name, folder, COMMAND.format(model=source.name),
-                                                       name))
-                 for (name, source, _), label, folder in zip(cards, labels, folders)]
+    moved = {(out / DISTILLED).as_posix(): (out / MODELS["p_s"]).as_posix()}  # the RL P+S's place until 2026-12-04
+    texts = []
+    for (name, source, _), folder in zip(cards, folders):
+        if name == DISTILLED:
+            texts.append((name, distilled_card(source, out / name, folder, DISTILL_COMMAND, name, moved)))
+        else:
+            texts.append((name, model_card(source, out / name, folder, COMMAND.format(model=source.name), name)))
+    if texts:
         write_text_atomically(out / "README.md", model_cards(texts, HEAD if cards[0][0] == DISTILLED else ""))
     return shipped
 
