@@ -24,6 +24,7 @@ import csv
 import json
 import math
 import pathlib
+from collections import Counter
 from typing import Any
 
 from shelf_env.files import write_text_atomically
@@ -163,9 +164,7 @@ def distilled_card(report_path: pathlib.Path, zip_path: pathlib.Path, results: p
     """
     report: dict[str, Any] = json.loads(report_path.read_text())
     primitives = checkpoint_primitives(zip_path)
-    series: dict[str, int] = {}
-    for shard in report["shards"]:
-        series[shard.split("_")[0]] = series.get(shard.split("_")[0], 0) + 1
+    series = Counter(shard.split("_")[0] for shard in report["shards"])  # shards per series (s00, s01, ...)
     val = (report.get("averaged") or {}).get("val") or report["history"][-1]["val"]
     first = report["history"][0]["val"]
     averaged = (f"the mean of the last {report['average_last']} epochs' weights"
