@@ -43,6 +43,11 @@ from shelf_env.files import write_json_atomically
 from shelf_env.privileged import dataset
 
 
+def report_path(model: str | pathlib.Path) -> pathlib.Path:
+    """Where the report of the model saved at ``model`` goes: beside it, ``NAME.distill.json``."""
+    return pathlib.Path(model).with_suffix(".distill.json")
+
+
 def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[list[int], list[int]]:
     """State indices (over the shards in order) of the training and validation scenes: the last
     ``val_fraction`` of each shard series' scenes (``meta["series"]``) are validation. Series are
@@ -179,8 +184,8 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "seconds": round(time.monotonic() - start, 1), "history": history}
     if last_out is not None:  # the plain model's report: this run's, without the mean
         plain = {k: v for k, v in report.items() if k != "averaged"} | {"out": str(last_out), "average_last": 1}
-        write_json_atomically(pathlib.Path(last_out).with_suffix(".distill.json"), plain)
-    write_json_atomically(pathlib.Path(out).with_suffix(".distill.json"), report)
+        write_json_atomically(report_path(last_out), plain)
+    write_json_atomically(report_path(out), report)
     return report
 
 

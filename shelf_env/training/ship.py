@@ -33,13 +33,15 @@ from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env.evaluation.protocol import checkpoint_primitives
 from shelf_env.files import copy_atomically, write_text_atomically
 from shelf_env.training.config import PRESETS
+from shelf_env.training.distill import report_path
 from shelf_env.training.model_card import distilled_card, model_card, model_cards
 
 #: The runs that ship, by the name of their preset and run (the preset gives the layout's primitives), and
 #: where each goes on the shelf: the RL-trained P+S was ``p_s.zip`` until the distilled one replaced it.
 MODELS = {"p_s": "v1/p_s.zip", "s": "s.zip"}
 #: Where a distilled P+S goes, and its distillation report beside it (what its card is written from).
-DISTILLED, DISTILLED_REPORT = "p_s.zip", "p_s.distill.json"
+DISTILLED = "p_s.zip"
+DISTILLED_REPORT = report_path(DISTILLED).name
 MAX_MB = 20.0
 COMMAND = "bash scripts/train_model.sh {model}"
 DISTILL_COMMAND = "bash results/distill_scaling/run.sh"
@@ -66,18 +68,18 @@ def check_checkpoint(path: pathlib.Path, model: str) -> None:
         raise ValueError(f"{path} has the maps {loaded.policy.maps}, not those of {model!r} (primitives {expected})")
 
 
-def report_of(zip_path: pathlib.Path) -> pathlib.Path:
-    """The distillation report written beside ``zip_path`` (``NAME.distill.json``)."""
-    return zip_path.with_name(zip_path.stem + ".distill.json")
+def evaluated_policies(folder: pathlib.Path) -> set[str]:
+    """The policy labels of an evaluation folder's ``results.csv``."""
+    with open(folder / "results.csv", newline="") as f:
+        return {row["policy"] for row in csv.DictReader(f)}
 
 
-def results_with(folders: list[pathlib.Path], label: str) -> pathlib.Path:
-    """The first of ``folders`` whose ``results.csv`` has rows of ``label``; a ValueError naming them if none."""
-    for folder in folders:
-        with open(folder / "results.csv", newline="") as f:
-            if any(row["policy"] == label for row in csv.DictReader(f)):
-                return folder
-    raise ValueError(f"{', '.join(str(f / 'results.csv') for f in folders)} has no rows of [{label!r}]; "
+def results_with(folders: list[tuple[pathlib.Path, set[str]]], label: str) -> pathlib.Path:
+    """The first of the ``(folder, its policies)`` that evaluated ``label``; a ValueError naming them if none."""
+    for folder, policies in folders:
+        if label in policies:
+            return folder
+    raise ValueError(f"{', '.join(str(f / 'results.csv') for f, _ in folders)} has no rows of [{label!r}]; "
                      "evaluate it or leave out --results")
 
 
@@ -103,21 +105,21 @@ def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
                              f"go on with {COMMAND.format(model=model)}")
         check_checkpoint(run / "model.zip", model)
     if distilled is not None:
-        if not report_of(distilled).is_file():
-            raise ValueError(f"{distilled} has no distillation report beside it ({report_of(distilled).name}): "
+        if not report_path(distilled).is_file():
+            raise ValueError(f"{distilled} has no distillation report beside it ({report_path(distilled).name}): "
                              "ship what python -m shelf_env.training.distill wrote")
         check_checkpoint(distilled, "p_s")
-    report = report_of(distilled) if distilled is not None else out / DISTILLED_REPORT
-    cards: list[tuple[str, pathlib.Path, str | None]] = []  # (name on the shelf, model, its label in results)
+    report = report_path(distilled) if distilled is not None else out / DISTILLED_REPORT
+    cards: list[tuple[str, pathlib.Path, str]] = []  # (name on the shelf, its source, its label in results)
     if report.is_file():  # its card is written from the report's copy on the shelf
         cards.append((DISTILLED, out / DISTILLED_REPORT, pathlib.Path(json.loads(report.read_text())["out"]).stem))
-    cards += [(MODELS[m], training / m, None) for m in MODELS if m in models or (out / MODELS[m]).exists()]
-    labels = [label or pathlib.Path(name).stem for name, _, label in cards]
+    cards += [(MODELS[m], training / m, m) for m in MODELS if m in models or (out / MODELS[m]).exists()]
     # checked before anything is written: the card needs every shipped model's rows
-    folders = [results_with(results, label) for label in labels] if results else [None] * len(cards)
+    evaluations = [(folder, evaluated_policies(folder)) for folder in results or []]
+    folders = [results_with(evaluations, label) if results else None for _, _, label in cards]
     shipped = [copy_atomically(training / m / "model.zip", out / MODELS[m]) for m in models]
     if distilled is not None:
-        copy_atomically(report_of(distilled), out / DISTILLED_REPORT)
+        copy_atomically(report_path(distilled), out / DISTILLED_REPORT)
         shipped.insert(0, copy_atomically(distilled, out / DISTILLED))
     moved = {(out / DISTILLED).as_posix(): (out / MODELS["p_s"]).as_posix()}  # the RL P+S's place until 2026-12-04
     texts = []
