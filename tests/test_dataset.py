@@ -302,3 +302,37 @@ def test_distillation_refuses_a_later_shard_of_another_layout_by_name(one_shard:
     assert distill_cli.main(["--data", str(tmp_path), "--init", MODEL, "--out", str(tmp_path / "x.zip")]) == 2
     assert f"dataset shard {other}: observation layout" in capsys.readouterr().err
     assert not (tmp_path / "x.zip").exists()
+
+
+def test_a_soup_of_distilled_models_and_their_validation_losses(one_shard: pathlib.Path, tmp_path: pathlib.Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """research/model_soup.py on two distilled replicates: its validation losses are distill's own (the same split
+    and loss), and the soup's is reported beside them."""
+    import shutil
+
+    from research import model_soup
+    from shelf_env.training import distill as distill_cli
+
+    data = tmp_path / "data"
+    data.mkdir()
+    shard = dataset.shard_path(one_shard, 0, 0)
+    for name in ("s00_00000.npz", "s00_00001.npz"):  # two scenes: one trains, the last is validation
+        shutil.copy(shard, data / name)
+    loss = ["--teacher-radius", "2", "--teacher-temperature", "1"]
+    models = []
+    for seed in (0, 1):
+        out = tmp_path / f"d{seed}.zip"
+        assert distill_cli.main(["--data", str(data), "--init", MODEL, "--out", str(out), "--epochs", "1",
+                                 "--val-fraction", "0.5", "--seed", str(seed), "--batch-states", "4", *loss]) == 0
+        models.append(out)
+    capsys.readouterr()
+    soup = tmp_path / "soup.zip"
+    assert model_soup.main([*map(str, models), "--out", str(soup), "--val-shards", "s00:2", "--data", str(data),
+                            "--val-fraction", "0.5", *loss]) == 0
+    rows = {row["model"]: row for row in map(json.loads, capsys.readouterr().out.splitlines())}
+    assert list(rows) == [*map(str, models), str(soup)]
+    for model in models:
+        own = json.loads(model.with_suffix(".distill.json").read_text())["history"][-1]["val"]
+        assert rows[str(model)]["loss"] == pytest.approx(own["loss"], abs=1e-4)
+    assert np.isfinite(rows[str(soup)]["loss"]) and rows[str(soup)]["loss"] != rows[str(models[0])]["loss"]
+    assert json.loads((tmp_path / "soup.soup.json").read_text())["ingredients"][1]["path"] == str(models[1])
