@@ -110,3 +110,17 @@ ps=examples/pretrained/v1/p_s.zip
   "$M/p_s_d52sh_aug_mpa_r2_t5.zip" "$M/p_s_d52sh_aug_mpa_r2_t5_e24.zip" "$M/p_s_d52sh_aug_mpa_pr2.zip" \
   "$M/p_s_dagger7_aug_mpa.zip" "$M/p_s_dagger7_aug_mpa_pr2_p5.zip" "$M/p_s_dagger7_aug_mpa_r2_ce1.zip" --ns 8 --runs 10 --seed 2000 --out "$DIR/falls.json"
 "$PY" research/scaling_curve.py "$DIR" --out "$DIR/report.md" --png "$DIR/scaling.png"
+# The eleventh session: the eighth point, all 324 shards at its start (55 + 50 + 205 + 14 of series 3), averaged
+# and plain from one run; then two model soups (research/model_soup.py) and every ingredient's distillation loss on
+# the eighth run's validation states, which none of them trained on (soups_val_loss.jsonl)
+SHARDS=s00:55,s01:50,s02:205,s03:14 distil p_s_dagger269_aug_mpa_r2_ce1_avg4 all --anchor 1.0 --teacher-radius 2 \
+  --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger269_aug_mpa_r2_ce1.zip"
+cp "$M/p_s_dagger269_aug_mpa_r2_ce1.distill.json" "$DIR/"
+V=(--val-shards s00:55,s01:50,s02:205,s03:14 --teacher-radius 2 --teacher-temperature 1)
+a=(p_s_dagger201_aug_mpa_r2_ce1_avg4 p_s_dagger269_aug_mpa_r2_ce1_avg4)
+b=(p_s_dagger150_aug_mpa_r2_ce1_avg4 p_s_dagger150_aug_mpa_r2_ce1_seed1_avg4 "${a[@]}")
+{
+  "$PY" research/model_soup.py "${a[@]/#/$M/}" --out "$M/p_s_soup_a.zip" "${V[@]}"
+  "$PY" research/model_soup.py "${b[@]/#/$M/}" --out "$M/p_s_soup_b.zip" "${V[@]}"
+} > "$DIR/soups_val_loss.jsonl"
+cp "$M/p_s_soup_a.soup.json" "$M/p_s_soup_b.soup.json" "$DIR/"
