@@ -5,7 +5,10 @@ A policy is named by a string: a registered name (`register_policy`: ``"h-d"``, 
 `PixelDoubleDQN` zip (P+S or S; the env layout follows the checkpoint), followed by any registered
 wrappers (`register_wrapper`), innermost first: ``"examples/pretrained/p_s.zip+loop-breaker"``
 plays the checkpoint under `sb3_pixeldqn.LoopBreaker`. A wrapper changes what the policy does, so
-results with it get cells and labels of their own (`policy_label`: ``p_s+loop-breaker``).
+results with it get cells and labels of their own (`policy_label`: ``p_s+loop-breaker``). A leading
+``LABEL=`` names the policy's results LABEL instead of the checkpoint's file stem
+(``"mine=runs/a/model.zip+loop-breaker"`` -> ``mine+loop-breaker``), so that two runs' ``model.zip`` can be
+evaluated side by side.
 
 The product registers its own names and the loop breaker here; an experiment registers its own
 wrappers when it is imported (``research/fall_risk.py`` registers ``+fall-filter``), and the product
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 import os
 import pathlib
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -82,9 +86,35 @@ def import_modules(modules: list[str]) -> None:
         importlib.import_module(module)
 
 
+#: What a ``LABEL=`` prefix may be: it names files (cells, plots), so letters, digits, ``.``, ``_`` and ``-``.
+LABEL_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+
+
+def split_label(policy: str) -> tuple[str | None, str]:
+    """``policy``'s own label and the rest: ``"mine=runs/a/model.zip"`` -> ``("mine", "runs/a/model.zip")``;
+    ``(None, policy)`` without one (an ``=`` after a path separator belongs to the path). A label that could not
+    name a file is refused by name."""
+    label, sep, rest = policy.partition("=")
+    if not sep or "/" in label or os.sep in label:
+        return None, policy
+    if not LABEL_PATTERN.fullmatch(label) or not rest:
+        raise ValueError(f"policy {policy!r}: LABEL=POLICY needs a label of letters, digits, '.', '_' and '-' "
+                         f"and a policy after '=', got label {label!r}")
+    return label, rest
+
+
+def relabelled_file(policy: str, path: str | os.PathLike) -> str:
+    """``policy`` with its checkpoint replaced by ``path``, keeping its label and wrappers (a copy of the file
+    elsewhere, e.g. on a Ray worker, that must give the same records)."""
+    label, rest = split_label(policy)
+    name, wrappers = policy_wrappers(rest)
+    return f"{label or pathlib.Path(name).stem}={path}{''.join(wrappers)}"
+
+
 def policy_wrappers(policy: str) -> tuple[str, tuple[str, ...]]:
-    """``policy`` split into its base (a name or checkpoint path) and its wrappers, innermost first:
-    ``"p.zip+fall-filter+loop-breaker"`` -> ``("p.zip", ("+fall-filter", "+loop-breaker"))``."""
+    """``policy`` split into its base (a name or checkpoint path) and its wrappers, innermost first, without its
+    label: ``"x=p.zip+fall-filter+loop-breaker"`` -> ``("p.zip", ("+fall-filter", "+loop-breaker"))``."""
+    policy = split_label(policy)[1]
     wrappers: list[str] = []
     stripped = True
     while stripped:
@@ -116,11 +146,13 @@ def is_named(policy: str) -> bool:
 
 
 def policy_label(policy: str) -> str:
-    """Short name used in files and plots: the name itself, or a checkpoint's file stem, with its wrappers."""
-    if is_named(policy):
-        return policy
-    name, wrappers = policy_wrappers(policy)
-    return pathlib.Path(name).stem + "".join(wrappers)
+    """Short name used in files and plots: its ``LABEL=`` if it has one, else the name itself or a checkpoint's
+    file stem; then its wrappers."""
+    label, rest = split_label(policy)
+    name, wrappers = policy_wrappers(rest)
+    if label is None:
+        label = name if name in POLICIES else pathlib.Path(name).stem
+    return label + "".join(wrappers)
 
 
 def checkpoint_primitives(path: str | os.PathLike) -> tuple[str, ...]:

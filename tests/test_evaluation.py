@@ -12,6 +12,7 @@ import pytest
 from pixel_envs import FindTheSquareEnv
 
 from sb3_pixeldqn import PixelDoubleDQN
+from shelf_env import policies
 from shelf_env.cli import evaluate as evaluate_cli
 from shelf_env.evaluation import protocol as ev
 from shelf_env.evaluation.protocol import EpisodeRecord
@@ -209,6 +210,19 @@ def test_a_label_stands_for_one_checkpoint_file(tmp_path, capsys):
     assert "holds cells of another 's' checkpoint" in err and "use another --out" in err
     assert evaluate_cli.main(["--policies", str(first), str(other), *grid, "--out", str(tmp_path / "x")]) == 2
     assert "share the label 's'" in capsys.readouterr().err
+    # LABEL=PATH names each file's cells: both in one folder, each fingerprinted under its own label
+    both = tmp_path / "both"
+    assert evaluate_cli.main(["--policies", f"one={first}", f"two={other}+loop-breaker", *grid[:-1], str(both)]) == 0
+    assert sorted(p.name for p in (both / "cells").iterdir()) == [
+        "one.sha256", "one__train__N01__seed0__runs1.json", "two+loop-breaker.sha256",
+        "two+loop-breaker__train__N01__seed0__runs1.json"]
+    assert (both / "cells" / "one.sha256").read_text().strip() == digest
+    assert [r["policy"] for r in json.loads((both / "results.json").read_text())["summary"]] == ["one",
+                                                                                               "two+loop-breaker"]
+    assert evaluate_cli.main(["--policies", "a=h-d", "a=h-a", *grid[:-1], str(tmp_path / "y")]) == 2
+    assert "policies a=h-d and a=h-a share the label 'a'" in capsys.readouterr().err
+    assert evaluate_cli.main(["--policies", "a b=h-d", *grid[:-1], str(tmp_path / "y")]) == 2
+    assert "LABEL=POLICY needs a label" in capsys.readouterr().err and not (tmp_path / "y").exists()
     with pytest.raises(ValueError, match="another 's' checkpoint"):
         ev.cached_cell(out, str(other), 1, 0, 1, "train")
     assert len(list((out / "cells").glob("*.json"))) == 1  # nothing written for the refused file
@@ -341,3 +355,16 @@ def test_plot_conditions_draws_curves_from_two_evaluations(tmp_path, capsys):
     plot_conditions.main(["--metric", "fell_rate", "--x", "n", "--runs", f"{tmp_path / '0'}:off",
                           f"{tmp_path / '0.2'}:on", "--out", str(tmp_path / "falls.png")])
     assert "h-d (on): N=5: 0.5, N=8: 0.5" in capsys.readouterr().out
+
+
+def test_a_label_prefix_names_a_policys_results() -> None:
+    assert ev.policy_label("mine=runs/a/model.zip+loop-breaker") == "mine+loop-breaker"
+    assert ev.policy_file("mine=runs/a/model.zip+loop-breaker") == "runs/a/model.zip"
+    assert ev.policy_label("runs/a/model.zip+loop-breaker") == "model+loop-breaker"  # the stem by default
+    assert ev.policy_label("hd=h-d") == "hd" and ev.is_named("hd=h-d") and ev.policy_label("h-d") == "h-d"
+    assert policies.split_label("runs/a=b/model.zip") == (None, "runs/a=b/model.zip")  # '=' inside a path
+    assert policies.relabelled_file("m=a/b.zip+loop-breaker", "/tmp/c.zip") == "m=/tmp/c.zip+loop-breaker"
+    assert ev.policy_label(policies.relabelled_file("a/s.zip", "/tmp/x/s.zip")) == "s"
+    for bad in ("a b=x.zip", "=x.zip", "x="):
+        with pytest.raises(ValueError, match="LABEL=POLICY needs a label"):
+            ev.policy_label(bad)

@@ -10,8 +10,9 @@ plays F..F+S-1 instead (e.g. the validation scenes of seed 2000, where a choice 
 Every (policy, object set, N, seed) cell runs in a worker process
 and is written to ``<out>/cells/`` as soon as it finishes; running the same command again skips
 the cells already on disk, so an interrupted evaluation resumes. A checkpoint's cells are named
-by its file stem, and ``<out>/cells/<stem>.sha256`` records which file they came from: another file
-of that name (a retrained model shipped again) is refused instead of inheriting them.
+by its file stem, or by LABEL given as ``LABEL=PATH`` (``--policies mine=runs/a/model.zip``), and
+``<out>/cells/<label>.sha256`` records which file they came from: another file of that label (a retrained
+model shipped again) is refused instead of inheriting them.
 ``--reuse-cells FOLDER`` copies the grid's cells that another folder, evaluated under the same
 conditions (and from the same checkpoint files), already holds. Episodes are bit-identical on one
 machine, not across machines: PyBullet's floating point differs between CPUs (5 of H-d's 30
@@ -95,7 +96,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--policies", nargs="+", required=True, help="h-d, h-a, random, h-d-lookahead, h-a-lookahead "
                                                                  "or checkpoint .zip paths; any of them+loop-breaker: "
-                                                                 "played under sb3_pixeldqn's LoopBreaker")
+                                                                 "played under sb3_pixeldqn's LoopBreaker; LABEL=... "
+                                                                 "names its results LABEL (default: the file stem)")
     p.add_argument("--ns", type=parse_ns, default=list(range(3, 15)), help="e.g. 3-14 or 3,5,8")
     p.add_argument("--runs", type=int, default=100, help="episodes per (policy, N, seed) (paper: 100)")
     p.add_argument("--seeds", type=int, default=5, help="number of seeds, 0..S-1 (paper: 5)")
@@ -178,7 +180,7 @@ def check_ray_address(address: str | None, timeout: float = 5.0) -> None:
 def _ray_cell(policy: str, checkpoint: bytes | None, n: int, seed: int, runs: int,
               object_set: str, conditions: dict | None = None) -> list[ev.EpisodeRecord]:
     """One cell on a Ray worker. A checkpoint travels as bytes (a cluster's nodes need not share the
-    driver's disk) and is written under its own file name, so the records carry the same label."""
+    driver's disk); the policy keeps its label (`policies.relabelled_file`), so the records are the same."""
     import tempfile
 
     import torch
@@ -189,7 +191,7 @@ def _ray_cell(policy: str, checkpoint: bytes | None, n: int, seed: int, runs: in
     with tempfile.TemporaryDirectory() as tmp:
         local = pathlib.Path(tmp) / pathlib.Path(ev.policy_file(policy)).name
         local.write_bytes(checkpoint)
-        return ev.evaluate_cell(str(local) + policy[len(ev.policy_file(policy)):], n, seed, runs, object_set,
+        return ev.evaluate_cell(policies.relabelled_file(policy, local), n, seed, runs, object_set,
                                 conditions=conditions)
 
 

@@ -389,28 +389,28 @@ def policy_digest(policy: str) -> str:
 
 
 def check_cell_owner(out: pathlib.Path, policies: list[str], record: bool = False) -> None:
-    """Cells are keyed by the policy's label, a checkpoint's file stem; make sure a label stands for
-    one file. Two checkpoints with one stem in ``policies`` are refused, and so is a checkpoint whose
-    label's cells in ``<out>`` came from another file (a retrained model shipped under the same
-    name): its old cells would otherwise be reused as its results. ``record=True`` writes each
-    checkpoint's sha256 beside its cells (before the first cell is written; with a wrapper that reads a
-    file of its own, `shelf_env.policies.policy_files`, of all their bytes together)."""
+    """Cells are keyed by the policy's label (`policy_label`: a checkpoint's file stem unless it is given
+    ``LABEL=``); make sure a label stands for one policy and one file. Two policies with one label in
+    ``policies`` are refused, and so is a checkpoint whose label's cells in ``<out>`` came from another file
+    (a retrained model shipped under the same name): its old cells would otherwise be reused as its results.
+    ``record=True`` writes each checkpoint's sha256 beside its cells (before the first cell is written; with a
+    wrapper that reads a file of its own, `shelf_env.policies.policy_files`, of all their bytes together)."""
     seen: dict[str, str] = {}
     for policy in policies:
-        if is_named(policy):
-            continue
         label = policy_label(policy)
         if seen.setdefault(label, policy) != policy:
-            raise ValueError(f"checkpoints {seen[label]} and {policy} share the label {label!r} (the file stem) "
-                             "that names their cells: rename one")
+            raise ValueError(f"policies {seen[label]} and {policy} share the label {label!r} that names their "
+                             "cells: give one another label (LABEL=PATH) or rename its file")
+        if is_named(policy):
+            continue
         digest = policy_digest(policy)
         path = fingerprint_path(out, policy)
         if path.exists():
             before = path.read_text().strip()
             if before != digest:
                 raise ValueError(f"{out} holds cells of another {label!r} checkpoint (sha256 {before[:12]}; "
-                                 f"{policy} is {digest[:12]}): use another --out, or delete "
-                                 f"{out / 'cells'}/{label}__* and {path.name} to evaluate it afresh")
+                                 f"{policy} is {digest[:12]}): use another --out or another label (LABEL=PATH), "
+                                 f"or delete {out / 'cells'}/{label}__* and {path.name} to evaluate it afresh")
         elif record:
             write_atomically(path, functools.partial(pathlib.Path.write_text, data=digest + "\n"))
 
