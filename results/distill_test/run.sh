@@ -110,6 +110,16 @@ for m in p_s_dagger201_aug_mpa_r2_ce1 p_s_dagger201_aug_mpa_r2_ce1_avg4; do
     --out results/distill_test "$@"
   .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
 done
+# the eleventh session: the eighth point (all 324 shards at its start), plain and averaged, on the same 90 scenes per
+# N with falls at N = 8 on 30; and the shipped model (the ninth session's averaged one) under the loop breaker
+for m in p_s_dagger269_aug_mpa_r2_ce1_avg4 p_s_dagger269_aug_mpa_r2_ce1; do
+  [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
+  .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
+    --out results/distill_test "$@"
+  .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
+done
+.venv/bin/shelf-evaluate --policies $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip+loop-breaker --ns 5,8,11 --runs 30 \
+  --seeds 3 --object-sets ycb --out results/distill_test "$@"
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
   h-d+loop-breaker h-a+loop-breaker $M/p_s_d52sh_aug_mpa.zip $M/p_s_dagger7_aug_mpa.zip $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
@@ -117,6 +127,8 @@ done
   $M/p_s_dagger115_aug_mpa_r2_ce1.zip $FT2 $M/p_s_dagger115_aug_mpa_r2_ce1.zip+loop-breaker $FT2+loop-breaker \
   $M/p_s_dagger150_aug_mpa_r2_ce1.zip $M/p_s_dagger150_aug_mpa_r2_ce1_seed1.zip $M/p_s_dagger115_aug_mpa_r2_ce1_seed1.zip \
   $M/p_s_dagger150_aug_mpa_r2_ce1_avg4.zip $M/p_s_dagger201_aug_mpa_r2_ce1.zip $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip \
+  $M/p_s_dagger269_aug_mpa_r2_ce1.zip $M/p_s_dagger269_aug_mpa_r2_ce1_avg4.zip \
+  $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip+loop-breaker \
   --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
 # the held-out scaling curve: falls and SR on the first 10 scenes per N (falls.json), and each model's SR and
 # margin over the better heuristic on every evaluation scene it played (90 per N for the cross-entropy models)

@@ -12,11 +12,7 @@ cd "$(dirname "$0")/../.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
 name=p_s_dagger201_aug_mpa_r2_ce1_avg4
-M=runs/models_v2
-mkdir -p "$M"
-# the shipped file under the name its cells carry (an evaluation labels a checkpoint by its file stem)
-[ -f "$M/$name.zip" ] || cp examples/pretrained/p_s.zip "$M/$name.zip"
-d=$M/$name.zip
+d=$name=examples/pretrained/p_s.zip  # the shipped file, labelled with the name its cells carry
 v1=examples/pretrained/v1/p_s.zip
 s=examples/pretrained/s.zip
 grid=(--ns 3-14 --runs 30 --object-sets ycb)
