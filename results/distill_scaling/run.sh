@@ -116,6 +116,10 @@ ps=examples/pretrained/v1/p_s.zip
 SHARDS=s00:55,s01:50,s02:205,s03:14 distil p_s_dagger269_aug_mpa_r2_ce1_avg4 all --anchor 1.0 --teacher-radius 2 \
   --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger269_aug_mpa_r2_ce1.zip"
 cp "$M/p_s_dagger269_aug_mpa_r2_ce1.distill.json" "$DIR/"
+# ... and its replicate at distillation seed 1 (the plain model is the curve's second point at 11,356 states)
+SHARDS=s00:55,s01:50,s02:205,s03:14 distil p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 all --anchor 1.0 --teacher-radius 2 \
+  --teacher-temperature 1 --average-last 4 --seed 1 --last-out "$M/p_s_dagger269_aug_mpa_r2_ce1_seed1.zip"
+cp "$M/p_s_dagger269_aug_mpa_r2_ce1_seed1.distill.json" "$DIR/"
 V=(--val-shards s00:55,s01:50,s02:205,s03:14 --teacher-radius 2 --teacher-temperature 1)
 a=(p_s_dagger201_aug_mpa_r2_ce1_avg4 p_s_dagger269_aug_mpa_r2_ce1_avg4)
 b=(p_s_dagger150_aug_mpa_r2_ce1_avg4 p_s_dagger150_aug_mpa_r2_ce1_seed1_avg4 "${a[@]}")

@@ -103,21 +103,20 @@ done
 .venv/bin/python -m shelf_env.evaluation.falls $M/p_s_dagger150_aug_mpa_r2_ce1.zip --ns 8 --runs 30 --seed 0 \
   --out results/distill_test/falls30.json
 # the ninth session: the seventh point (all 256 shards at its start), plain and with averaged weights (adopted on the
-# validation scenes: results/distill_scaling/val90_averaging.md), on the same 90 scenes per N; falls at N = 8 on 30
-for m in p_s_dagger201_aug_mpa_r2_ce1 p_s_dagger201_aug_mpa_r2_ce1_avg4; do
+# validation scenes: results/distill_scaling/val90_averaging.md), on the same 90 scenes per N; falls at N = 8 on 30;
+# the eleventh: the eighth point (all 324 shards at its start), averaged and plain, the same way
+for m in p_s_dagger201_aug_mpa_r2_ce1 p_s_dagger201_aug_mpa_r2_ce1_avg4 p_s_dagger269_aug_mpa_r2_ce1_avg4 \
+    p_s_dagger269_aug_mpa_r2_ce1; do
   [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
   .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
     --out results/distill_test "$@"
   .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
 done
-# the eleventh session: the eighth point (all 324 shards at its start), plain and averaged, on the same 90 scenes per
-# N with falls at N = 8 on 30; and the shipped model (the ninth session's averaged one) under the loop breaker
-for m in p_s_dagger269_aug_mpa_r2_ce1_avg4 p_s_dagger269_aug_mpa_r2_ce1; do
-  [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
-  .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
-    --out results/distill_test "$@"
-  .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
-done
+# ... the eighth point's seed-1 replicate (plain), SR only
+[ -f $M/p_s_dagger269_aug_mpa_r2_ce1_seed1.zip ] || bash results/distill_scaling/run.sh
+.venv/bin/shelf-evaluate --policies $M/p_s_dagger269_aug_mpa_r2_ce1_seed1.zip --ns 5,8,11 --runs 30 --seeds 3 \
+  --object-sets ycb --out results/distill_test "$@"
+# ... and the shipped model (the ninth session's averaged one) under the loop breaker
 .venv/bin/shelf-evaluate --policies $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip+loop-breaker --ns 5,8,11 --runs 30 \
   --seeds 3 --object-sets ycb --out results/distill_test "$@"
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
@@ -127,7 +126,7 @@ done
   $M/p_s_dagger115_aug_mpa_r2_ce1.zip $FT2 $M/p_s_dagger115_aug_mpa_r2_ce1.zip+loop-breaker $FT2+loop-breaker \
   $M/p_s_dagger150_aug_mpa_r2_ce1.zip $M/p_s_dagger150_aug_mpa_r2_ce1_seed1.zip $M/p_s_dagger115_aug_mpa_r2_ce1_seed1.zip \
   $M/p_s_dagger150_aug_mpa_r2_ce1_avg4.zip $M/p_s_dagger201_aug_mpa_r2_ce1.zip $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip \
-  $M/p_s_dagger269_aug_mpa_r2_ce1.zip $M/p_s_dagger269_aug_mpa_r2_ce1_avg4.zip \
+  $M/p_s_dagger269_aug_mpa_r2_ce1.zip $M/p_s_dagger269_aug_mpa_r2_ce1_avg4.zip $M/p_s_dagger269_aug_mpa_r2_ce1_seed1.zip \
   $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip+loop-breaker \
   --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
 # the held-out scaling curve: falls and SR on the first 10 scenes per N (falls.json), and each model's SR and
