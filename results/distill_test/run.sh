@@ -119,6 +119,10 @@ done
 # ... and the shipped model (the ninth session's averaged one) under the loop breaker
 .venv/bin/shelf-evaluate --policies $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip+loop-breaker --ns 5,8,11 --runs 30 \
   --seeds 3 --object-sets ycb --out results/distill_test "$@"
+b=p_s_dagger201_aug_mpa_r2_ce1_avg4
+.venv/bin/python -m shelf_env.evaluation.compare results/distill_test --pair "$b+loop-breaker" $b \
+  --pair "$b+loop-breaker" h-d --pair "$b+loop-breaker" h-a --pair "$b+loop-breaker" h-d+loop-breaker \
+  --pair "$b+loop-breaker" h-a+loop-breaker --out results/distill_test/paired_loop_breaker.md
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
   h-d+loop-breaker h-a+loop-breaker $M/p_s_d52sh_aug_mpa.zip $M/p_s_dagger7_aug_mpa.zip $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
