@@ -105,10 +105,11 @@ def split_label(policy: str) -> tuple[str | None, str]:
 
 def relabelled_file(policy: str, path: str | os.PathLike) -> str:
     """``policy`` with its checkpoint replaced by ``path``, keeping its label and wrappers (a copy of the file
-    elsewhere, e.g. on a Ray worker, that must give the same records)."""
+    elsewhere, e.g. on a Ray worker, that must give the same records: without a label, the copy must keep the
+    file's name)."""
     label, rest = split_label(policy)
-    name, wrappers = policy_wrappers(rest)
-    return f"{label or pathlib.Path(name).stem}={path}{''.join(wrappers)}"
+    wrappers = policy_wrappers(rest)[1]
+    return f"{label + '=' if label else ''}{path}{''.join(wrappers)}"
 
 
 def policy_wrappers(policy: str) -> tuple[str, tuple[str, ...]]:

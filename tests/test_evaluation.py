@@ -364,7 +364,7 @@ def test_a_label_prefix_names_a_policys_results() -> None:
     assert ev.policy_label("hd=h-d") == "hd" and ev.is_named("hd=h-d") and ev.policy_label("h-d") == "h-d"
     assert policies.split_label("runs/a=b/model.zip") == (None, "runs/a=b/model.zip")  # '=' inside a path
     assert policies.relabelled_file("m=a/b.zip+loop-breaker", "/tmp/c.zip") == "m=/tmp/c.zip+loop-breaker"
-    assert ev.policy_label(policies.relabelled_file("a/s.zip", "/tmp/x/s.zip")) == "s"
+    assert policies.relabelled_file("a/my s.zip+loop-breaker", "/tmp/x/my s.zip") == "/tmp/x/my s.zip+loop-breaker"
     for bad in ("a b=x.zip", "=x.zip", "x="):
         with pytest.raises(ValueError, match="LABEL=POLICY needs a label"):
             ev.policy_label(bad)
