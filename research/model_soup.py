@@ -26,16 +26,14 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
 import torch as th
 
 from shelf_env.files import write_json_atomically
 
 
 def report_path(out: str | pathlib.Path) -> pathlib.Path:
-    """Where the soup's list of ingredients is written: ``<out stem>.soup.json`` beside it."""
-    out = pathlib.Path(out)
-    return out.with_name(out.stem + ".soup.json")
+    """Where the soup's list of ingredients is written: ``NAME.soup.json`` beside it (as distill's reports)."""
+    return pathlib.Path(out).with_suffix(".soup.json")
 
 
 def _layout(model: Any) -> tuple[Any, ...]:
@@ -91,13 +89,11 @@ def validation_losses(paths: Sequence[str | pathlib.Path], data: pathlib.Path, m
     from sb3_pixeldqn import PixelDoubleDQN
     from sb3_pixeldqn.distill import evaluate
     from shelf_env.privileged import dataset
-    from shelf_env.training.distill import select_shards, split_by_scene
+    from shelf_env.training.distill import select_shards, split_states
 
-    shards = select_shards(dataset.load_dataset(data), max_shards)
-    _, val_idx = split_by_scene(shards, val_fraction)
-    if not val_idx:
+    val = split_states(select_shards(dataset.load_dataset(data), max_shards), val_fraction)[1]
+    if val is None:
         raise ValueError(f"{max_shards} at val_fraction {val_fraction} leaves no validation states")
-    val = dataset.labelled_states(shards, masks=True, progress=True).subset(np.array(val_idx))
     return {str(p): evaluate(PixelDoubleDQN.load(p, device="cpu").policy, val, loss) for p in paths}
 
 

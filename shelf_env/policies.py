@@ -108,14 +108,18 @@ def relabelled_file(policy: str, path: str | os.PathLike) -> str:
     elsewhere, e.g. on a Ray worker, that must give the same records: without a label, the copy must keep the
     file's name)."""
     label, rest = split_label(policy)
-    wrappers = policy_wrappers(rest)[1]
+    wrappers = _strip_wrappers(rest)[1]
     return f"{label + '=' if label else ''}{path}{''.join(wrappers)}"
 
 
 def policy_wrappers(policy: str) -> tuple[str, tuple[str, ...]]:
     """``policy`` split into its base (a name or checkpoint path) and its wrappers, innermost first, without its
     label: ``"x=p.zip+fall-filter+loop-breaker"`` -> ``("p.zip", ("+fall-filter", "+loop-breaker"))``."""
-    policy = split_label(policy)[1]
+    return _strip_wrappers(split_label(policy)[1])
+
+
+def _strip_wrappers(policy: str) -> tuple[str, tuple[str, ...]]:
+    """`policy_wrappers` of a policy whose label is already split off."""
     wrappers: list[str] = []
     stripped = True
     while stripped:
@@ -150,7 +154,7 @@ def policy_label(policy: str) -> str:
     """Short name used in files and plots: its ``LABEL=`` if it has one, else the name itself or a checkpoint's
     file stem; then its wrappers."""
     label, rest = split_label(policy)
-    name, wrappers = policy_wrappers(rest)
+    name, wrappers = _strip_wrappers(rest)
     if label is None:
         label = name if name in POLICIES else pathlib.Path(name).stem
     return label + "".join(wrappers)

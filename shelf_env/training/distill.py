@@ -75,6 +75,18 @@ def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[li
     return sorted(train), sorted(val)
 
 
+def split_states(shards: list[dataset.Shard], val_fraction: float, masks: bool = True, progress: bool = True,
+                 max_states: int | None = None) -> tuple[LabelledStates, LabelledStates | None]:
+    """The training and validation states of ``shards`` (`split_by_scene`), labelled as `run` reads them
+    (``masks``, ``progress``: its options); ``max_states``: the first that many training states only. None for
+    the validation states where the split leaves none."""
+    labelled = dataset.labelled_states(shards, masks=masks, progress=progress)
+    train_idx, val_idx = split_by_scene(shards, val_fraction)
+    if max_states is not None:
+        train_idx = train_idx[:max_states]
+    return labelled.subset(np.array(train_idx)), labelled.subset(np.array(val_idx)) if val_idx else None
+
+
 def select_shards(shards: list[dataset.Shard], spec: int | str | None) -> list[dataset.Shard]:
     """The shards a run uses, so that a growing dataset's past can be named: all (None), the first ``spec``
     in name order (a number), or the first k of each series listed (``"s00:55,s01:9"``; other series left
@@ -137,12 +149,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
                          f"maps; the dataset's are {stored['obs_shape']} and {stored['map_names']}")
     # every shard in the first one's layout (`load_shard`'s check, naming the shard), then a growing dataset's past
     shards = select_shards(dataset.load_dataset(data, expect_layout=stored), max_shards)
-    labelled = dataset.labelled_states(shards, masks=masks, progress=progress)
-    train_idx, val_idx = split_by_scene(shards, val_fraction)
-    if max_states is not None:
-        train_idx = train_idx[:max_states]
-    train: LabelledStates = labelled.subset(np.array(train_idx))
-    val = labelled.subset(np.array(val_idx)) if val_idx else None
+    train, val = split_states(shards, val_fraction, masks, progress, max_states)
     transforms = list(model.augment) if augment else []
     anchor_net = copy.deepcopy(model.q_net).requires_grad_(False) if anchor > 0 else None
     start = time.monotonic()
