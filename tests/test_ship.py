@@ -116,3 +116,53 @@ def test_a_distilled_model_without_its_report_or_of_another_layout_is_refused(fi
     assert main(["--training", str(finished_run), "--out", str(out), "--distilled", str(zip_path)]) == 2
     assert "ship: error:" in capsys.readouterr().out
     assert not out.exists()
+
+
+def test_a_new_distilled_model_moves_the_one_it_replaces_to_v2_with_its_report_and_card(finished_run, tmp_path,
+                                                                                         capsys):
+    out = tmp_path / "pretrained"
+    first = distillation(finished_run, tmp_path / "a", init=str(out / "p_s.zip"))
+    ship(None, finished_run, out, None, first)
+    # the second: other bytes (another checkpoint of the same layout), started from v1 as the recipe does
+    second = distillation(finished_run, tmp_path / "b", name="p_s_dagger9_avg2", init=str(out / "v1" / "p_s.zip"))
+    model = PixelDoubleDQN.load(second)
+    model.num_timesteps += 1
+    model.save(second)
+    results = tmp_path / "eval"
+    results.mkdir()
+    (results / "results.csv").write_text(
+        "policy,object_set,num_objects,sr_mean,sr_std,ae_mean,mae_mean\n"
+        "p_s_dagger9_avg2,ycb,3,95.0,1.0,1.3,0.9\np_s_dagger3_avg2,ycb,3,90.0,1.0,1.2,0.9\n"
+        "p_s,ycb,3,80.0,2.0,1.1,0.8\n")
+    assert ship(None, finished_run, out, [results], second)[0] == out / "p_s.zip"
+    assert (out / "p_s.zip").read_bytes() == second.read_bytes()
+    assert (out / "v2" / "p_s.zip").read_bytes() == first.read_bytes()  # the one it replaced, kept
+    assert json.loads((out / "v2" / "p_s.distill.json").read_text())["out"].endswith("p_s_dagger3_avg2.zip")
+    assert json.loads((out / "p_s.distill.json").read_text())["out"].endswith("p_s_dagger9_avg2.zip")
+    card = (out / "README.md").read_text()
+    assert card.startswith("# Pretrained models: `p_s.zip`, `v2/p_s.zip`, `v1/p_s.zip`")
+    assert "each in `v<k>/` with its report and card (`v2/`)" in card
+    assert "\n## `v2/p_s.zip`: PixelDoubleDQN, P+S (pick-and-place, push-left, push-right), distilled" in card
+    assert 'PixelDoubleDQN.load("' + str(out / "v2" / "p_s.zip") + '")' in card
+    # each distilled card reads its own report and rows: the first started from p_s.zip when that was v1
+    assert "this model is `p_s_dagger9_avg2` there" in card and "this model is `p_s_dagger3_avg2` there" in card
+    assert f"Started from `{out / 'p_s.zip'}` as it was then (now `{out / 'v1' / 'p_s.zip'}`)" in card
+    assert f"Started from `{out / 'v1' / 'p_s.zip'}` and" in card
+    assert "its report: `" + str(out / "v2" / "p_s.distill.json") + "`" in card
+    # shipping the same bytes again moves nothing; a third model goes to v3, the newest first
+    ship(None, finished_run, out, [results], second)
+    assert not (out / "v3").exists()
+    model.num_timesteps += 1
+    model.save(second)
+    ship(None, finished_run, out, None, second)
+    assert json.loads((out / "v3" / "p_s.distill.json").read_text())["out"].endswith("p_s_dagger9_avg2.zip")
+    assert (out / "README.md").read_text().startswith(
+        "# Pretrained models: `p_s.zip`, `v3/p_s.zip`, `v2/p_s.zip`, `v1/p_s.zip`")
+    # a p_s.zip without its report cannot keep its card: refused, nothing written
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    shutil.copy(first, bare / "p_s.zip")
+    assert main(["--training", str(finished_run), "--out", str(bare), "--distilled", str(second)]) == 2
+    assert "p_s.zip has no distillation report beside it (p_s.distill.json)" in capsys.readouterr().out
+    assert sorted(p.name for p in bare.iterdir()) == ["p_s.zip"]
+    assert (bare / "p_s.zip").read_bytes() == first.read_bytes()

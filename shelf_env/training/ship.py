@@ -9,7 +9,8 @@ The shelf holds the P+S to use, ``p_s.zip``: since 2026-12-04 a P+S distilled fr
 (``python -m shelf_env.training.distill``) with its report beside it (``p_s.distill.json``); ``s.zip``,
 the pick-only S trained with PixelDoubleDQN; and ``v1/p_s.zip``, the P+S trained with PixelDoubleDQN
 that was ``p_s.zip`` until then (the model every result before that date calls ``p_s``, and the one the
-distillation started from).
+distillation started from). Nothing shipped is lost: a distilled ``p_s.zip`` that a new one replaces
+moves, with its report, to the first free ``v<k>/`` (k >= 2), and keeps its card there.
 
 A run ships once its curriculum is over (``finished`` in ``results/training/<model>/progress.json``: the
 last stage has trained its ``max_stage_timesteps``), never mid-run; a model named on the command line
@@ -49,6 +50,34 @@ HEAD = ("`p_s.zip` is the P+S to use: distilled from the teacher dataset into th
         "trained with PixelDoubleDQN that was `p_s.zip` until 2026-12-04 (every result before that date calls it "
         "`p_s`). Each model was made by the command in its card and copied here with `bash scripts/ship_models.sh` "
         "(which also writes this file).")
+#: What the head adds when earlier distilled P+S are on the shelf (``v<k>/``, k >= 2).
+ARCHIVE_HEAD = (" The distilled P+S that `p_s.zip` replaced stay here, each in `v<k>/` with its report and card ({}); "
+                "results name each distilled model by its distillation's name.")
+
+
+def archived(out: pathlib.Path) -> list[int]:
+    """The versions ``k >= 2`` of the earlier distilled P+S on the shelf (``v<k>/p_s.zip`` and its report),
+    newest first."""
+    versions = [int(report.parent.name[1:]) for report in out.glob(f"v*/{DISTILLED_REPORT}")
+                if report.parent.name[1:].isdigit() and int(report.parent.name[1:]) >= 2]
+    return sorted(versions, reverse=True)
+
+
+def shelf_label(report: pathlib.Path) -> str:
+    """The label a distilled model's results carry: the file stem its distillation wrote (the report's ``out``)."""
+    return pathlib.Path(json.loads(report.read_text())["out"]).stem
+
+
+def replaced_version(out: pathlib.Path, distilled: pathlib.Path) -> int | None:
+    """The ``v<k>`` the shelf's distilled ``p_s.zip`` moves to when ``distilled`` replaces it (None: nothing to
+    move, or the same bytes); a ValueError when the shelf's ``p_s.zip`` has no report, so its card would be lost."""
+    current = out / DISTILLED
+    if not current.is_file() or current.read_bytes() == distilled.read_bytes():
+        return None
+    if not (out / DISTILLED_REPORT).is_file():
+        raise ValueError(f"{current} has no distillation report beside it ({DISTILLED_REPORT}), so it cannot move "
+                         "to v<k>/ with its card; move it off the shelf first")
+    return max([*archived(out), 1]) + 1
 
 
 def run_is_over(run: pathlib.Path) -> bool:
@@ -109,27 +138,41 @@ def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
             raise ValueError(f"{distilled} has no distillation report beside it ({report_path(distilled).name}): "
                              "ship what python -m shelf_env.training.distill wrote")
         check_checkpoint(distilled, "p_s")
+    replaced = replaced_version(out, distilled) if distilled is not None else None
+    versions = ([replaced] if replaced else []) + archived(out)  # the earlier distilled P+S, newest first
     report = report_path(distilled) if distilled is not None else out / DISTILLED_REPORT
-    cards: list[tuple[str, pathlib.Path, str]] = []  # (name on the shelf, its source, its label in results)
-    if report.is_file():  # its card is written from the report's copy on the shelf
-        cards.append((DISTILLED, out / DISTILLED_REPORT, pathlib.Path(json.loads(report.read_text())["out"]).stem))
-    cards += [(MODELS[m], training / m, m) for m in MODELS if m in models or (out / MODELS[m]).exists()]
+    # (name on the shelf, its source (a distilled model's: its report's copy on the shelf), its label in results,
+    # and for a distilled P+S its version: the RL P+S is v1, so the first distilled one is v2)
+    cards: list[tuple[str, pathlib.Path, str, int]] = []
+    if report.is_file():
+        cards.append((DISTILLED, out / DISTILLED_REPORT, shelf_label(report), max([*versions, 1]) + 1))
+    for k in versions:
+        source = out / DISTILLED_REPORT if k == replaced else out / f"v{k}" / DISTILLED_REPORT
+        cards.append((f"v{k}/{DISTILLED}", out / f"v{k}" / DISTILLED_REPORT, shelf_label(source), k))
+    cards += [(MODELS[m], training / m, m, 1) for m in MODELS if m in models or (out / MODELS[m]).exists()]
     # checked before anything is written: the card needs every shipped model's rows
     evaluations = [(folder, evaluated_policies(folder)) for folder in results or []]
-    folders = [results_with(evaluations, label) if results else None for _, _, label in cards]
+    folders = [results_with(evaluations, label) if results else None for _, _, label, _ in cards]
     shipped = [copy_atomically(training / m / "model.zip", out / MODELS[m]) for m in models]
     if distilled is not None:
+        if replaced:  # the P+S it replaces keeps its place on the shelf, with its report
+            copy_atomically(out / DISTILLED_REPORT, out / f"v{replaced}" / DISTILLED_REPORT)
+            copy_atomically(out / DISTILLED, out / f"v{replaced}" / DISTILLED)
         copy_atomically(report_path(distilled), out / DISTILLED_REPORT)
         shipped.insert(0, copy_atomically(distilled, out / DISTILLED))
-    moved = {(out / DISTILLED).as_posix(): (out / MODELS["p_s"]).as_posix()}  # the RL P+S's place until 2026-12-04
     texts = []
-    for (name, source, _), folder in zip(cards, folders):
-        if name == DISTILLED:
+    for (name, source, _, k), folder in zip(cards, folders):
+        if source.name == DISTILLED_REPORT:
+            # a report names its starting model where it was then: p_s.zip then is the version before it now
+            moved = {(out / DISTILLED).as_posix(): (out / f"v{k - 1}" / DISTILLED).as_posix()}
             texts.append((name, distilled_card(source, out / name, folder, DISTILL_COMMAND, name, moved)))
         else:
             texts.append((name, model_card(source, out / name, folder, COMMAND.format(model=source.name), name)))
     if texts:
-        write_text_atomically(out / "README.md", model_cards(texts, HEAD if cards[0][0] == DISTILLED else ""))
+        head = ""
+        if cards[0][0] == DISTILLED:
+            head = HEAD + (ARCHIVE_HEAD.format(", ".join(f"`v{k}/`" for k in versions)) if versions else "")
+        write_text_atomically(out / "README.md", model_cards(texts, head))
     return shipped
 
 
