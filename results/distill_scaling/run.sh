@@ -137,3 +137,8 @@ done
 "$PY" -m shelf_env.evaluation.compare "$DIR/val90" --pair p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 \
   p_s_dagger201_aug_mpa_r2_ce1_avg4 --out "$DIR/val90_seed1.md"
 
+# The twelfth session: the ninth point, all 344 shards at its start (55 + 50 + 205 + 34 of series 3), averaged and
+# plain from one run
+SHARDS=s00:55,s01:50,s02:205,s03:34 distil p_s_dagger289_aug_mpa_r2_ce1_avg4 all --anchor 1.0 --teacher-radius 2 \
+  --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger289_aug_mpa_r2_ce1.zip"
+cp "$M/p_s_dagger289_aug_mpa_r2_ce1.distill.json" "$DIR/"
