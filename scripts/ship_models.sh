@@ -7,8 +7,10 @@
 # table comes from the first of results/models_v3/open, results/models_v2/open (the distilled P+S's §V
 # evaluations) and results/models (issue 10's) that evaluated it, where they are complete.
 # Order: train_model.sh p_s|s or distill -> ship_models.sh -> evaluate_models.sh / results/models_v2/run.sh ->
-# ship_models.sh (the cards' tables). The distilled P+S shipped on 2026-12-04:
+# ship_models.sh (the cards' tables). The distilled P+S shipped on 2026-12-04 (now v2/p_s.zip), then the one that
+# replaced it the same day (results/models_v3):
 #   bash scripts/ship_models.sh --distilled runs/distill_scaling/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip
+#   bash scripts/ship_models.sh --distilled data/candidates/p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4.zip
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null

@@ -10,7 +10,7 @@ import pytest
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env.evaluation import protocol as ev
-from shelf_env.training.ship import DISTILLED, DISTILLED_REPORT, MAX_MB, MODELS
+from shelf_env.training.ship import DISTILLED, DISTILLED_REPORT, MAX_MB, MODELS, archived
 
 PRETRAINED = pathlib.Path(__file__).resolve().parents[1] / "examples" / "pretrained"
 SHIPPED = sorted(PRETRAINED.rglob("*.zip"))
@@ -19,8 +19,10 @@ SHIPPED = sorted(PRETRAINED.rglob("*.zip"))
 def test_what_is_shipped_is_known_and_carded():
     assert SHIPPED, "no model shipped in examples/pretrained (bash scripts/ship_models.sh)"
     names = {z.relative_to(PRETRAINED).as_posix() for z in SHIPPED}
-    assert names <= set(MODELS.values()) | {DISTILLED}
+    replaced = {f"v{k}/{DISTILLED}" for k in archived(PRETRAINED)}  # earlier distilled P+S, each with its report
+    assert names <= set(MODELS.values()) | {DISTILLED} | replaced
     assert (DISTILLED in names) == (PRETRAINED / DISTILLED_REPORT).is_file()  # a distilled P+S ships with its report
+    assert all((PRETRAINED / name).is_file() for name in replaced)
     card = (PRETRAINED / "README.md").read_text()
     for zip_path in SHIPPED:
         assert f"`{zip_path.relative_to(PRETRAINED).as_posix()}`: PixelDoubleDQN" in card

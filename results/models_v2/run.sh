@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The §V evaluation of the P+S shipped since 2026-12-04 (docs/results.md): the P+S distilled from the teacher dataset
-# (examples/pretrained/p_s.zip; its cells carry its distillation's name, p_s_dagger201_aug_mpa_r2_ce1_avg4) beside the
+# The §V evaluation of the first distilled P+S, shipped on 2026-12-04 (docs/results.md): the P+S distilled from the
+# teacher dataset (examples/pretrained/v2/p_s.zip since the next one replaced it, p_s.zip until then; its cells carry
+# its distillation's name, p_s_dagger201_aug_mpa_r2_ce1_avg4; results/models_v3 is the next one's) beside the
 # P+S it replaced (examples/pretrained/v1/p_s.zip, `p_s` in every result), S, H-d and H-a on issue 10's grid: N = 3..14,
 # unseen YCB objects, 30 runs x 3 seeds, open loop (open/); and closed loop + safe picks on seed 0 (closed_safe/), as
 # results/closed_loop/on_deeper_safe played v1 and the heuristics. The other policies' cells are copied from those
@@ -12,7 +13,7 @@ cd "$(dirname "$0")/../.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
 name=p_s_dagger201_aug_mpa_r2_ce1_avg4
-d=$name=examples/pretrained/p_s.zip  # the shipped file, labelled with the name its cells carry
+d=$name=examples/pretrained/v2/p_s.zip  # the file shipped then, labelled with the name its cells carry
 v1=examples/pretrained/v1/p_s.zip
 s=examples/pretrained/s.zip
 grid=(--ns 3-14 --runs 30 --object-sets ycb)
