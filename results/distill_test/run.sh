@@ -130,6 +130,12 @@ for m in p_s_dagger289_aug_mpa_r2_ce1 p_s_dagger289_aug_mpa_r2_ce1_avg4; do
     --out results/distill_test "$@"
   .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
 done
+# ... and the P+S shipped in the twelfth session (the eleventh's seed-1 averaged model): its cells at N = 5, 8, 11 from
+# its §V grid (results/models_v3, the same scenes), its falls at N = 8 as every point's
+s1=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4=examples/pretrained/p_s.zip
+.venv/bin/shelf-evaluate --policies "$s1" --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test \
+  --reuse-cells results/models_v3/open "$@"
+.venv/bin/python -m shelf_env.evaluation.falls "$s1" --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
   h-d+loop-breaker h-a+loop-breaker $M/p_s_d52sh_aug_mpa.zip $M/p_s_dagger7_aug_mpa.zip $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
@@ -139,7 +145,7 @@ done
   $M/p_s_dagger150_aug_mpa_r2_ce1_avg4.zip $M/p_s_dagger201_aug_mpa_r2_ce1.zip $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip \
   $M/p_s_dagger269_aug_mpa_r2_ce1.zip $M/p_s_dagger269_aug_mpa_r2_ce1_avg4.zip $M/p_s_dagger269_aug_mpa_r2_ce1_seed1.zip \
   $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip+loop-breaker $M/p_s_dagger289_aug_mpa_r2_ce1.zip \
-  $M/p_s_dagger289_aug_mpa_r2_ce1_avg4.zip --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
+  $M/p_s_dagger289_aug_mpa_r2_ce1_avg4.zip "$s1" --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
 # the held-out scaling curve: falls and SR on the first 10 scenes per N (falls.json), and each model's SR and
 # margin over the better heuristic on every evaluation scene it played (90 per N for the cross-entropy models)
 .venv/bin/python research/scaling_curve.py results/distill_test --reports results/distill_scaling \
