@@ -58,9 +58,8 @@ ARCHIVE_HEAD = (" The distilled P+S that `p_s.zip` replaced stay here, each in `
 def archived(out: pathlib.Path) -> list[int]:
     """The versions ``k >= 2`` of the earlier distilled P+S on the shelf (``v<k>/p_s.zip`` and its report),
     newest first."""
-    versions = [int(report.parent.name[1:]) for report in out.glob(f"v*/{DISTILLED_REPORT}")
-                if report.parent.name[1:].isdigit() and int(report.parent.name[1:]) >= 2]
-    return sorted(versions, reverse=True)
+    folders = [report.parent.name.removeprefix("v") for report in out.glob(f"v*/{DISTILLED_REPORT}")]
+    return sorted((k for k in map(int, filter(str.isdigit, folders)) if k >= 2), reverse=True)
 
 
 def shelf_label(report: pathlib.Path) -> str:
