@@ -142,3 +142,18 @@ done
 SHARDS=s00:55,s01:50,s02:205,s03:34 distil p_s_dagger289_aug_mpa_r2_ce1_avg4 all --anchor 1.0 --teacher-radius 2 \
   --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger289_aug_mpa_r2_ce1.zip"
 cp "$M/p_s_dagger289_aug_mpa_r2_ce1.distill.json" "$DIR/"
+# The thirteenth session: the ninth point's data again at seeds 1 and 2 (three seeds at 12,206 training states), then
+# the two averaged models on the validation scenes (evaluation seeds 2000-2002, 90 per N at N = 5, 8, 11) against the
+# shipped model's cells there (the eleventh session's seed-1 averaged model, val90): the rule in the page
+for s in 1 2; do
+  SHARDS=s00:55,s01:50,s02:205,s03:34 distil "p_s_dagger289_aug_mpa_r2_ce1_seed${s}_avg4" all --anchor 1.0 \
+    --teacher-radius 2 --teacher-temperature 1 --average-last 4 --seed "$s" \
+    --last-out "$M/p_s_dagger289_aug_mpa_r2_ce1_seed$s.zip"
+  cp "$M/p_s_dagger289_aug_mpa_r2_ce1_seed$s.distill.json" "$DIR/"
+  "$PY" -m shelf_env.cli.evaluate --policies "$M/p_s_dagger289_aug_mpa_r2_ce1_seed${s}_avg4.zip" --ns 5,8,11 --runs 30 \
+    --seeds 3 --first-seed 2000 --object-sets ycb --workers 1 --out "$DIR/val90"
+done
+"$PY" -m shelf_env.evaluation.compare "$DIR/val90" --pair p_s_dagger289_aug_mpa_r2_ce1_seed1_avg4 \
+  p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 --pair p_s_dagger289_aug_mpa_r2_ce1_seed2_avg4 \
+  p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 --pair p_s_dagger289_aug_mpa_r2_ce1_seed1_avg4 \
+  p_s_dagger289_aug_mpa_r2_ce1_seed2_avg4 --out "$DIR/val90_seeds.md"
