@@ -7,6 +7,7 @@
 from sb3_pixeldqn.actor import ActorVecEnv
 from sb3_pixeldqn.buffers import HindsightRelabelReplayBuffer
 from sb3_pixeldqn.callbacks import CurriculumCallback, QMapImageCallback
+from sb3_pixeldqn.ensemble import QEnsemble
 from sb3_pixeldqn.loop_breaker import LoopBreaker
 from sb3_pixeldqn.pixel_dqn import PixelDoubleDQN
 from sb3_pixeldqn.policies import PICK_AND_PUSH_MAPS, PICK_ONLY_MAPS, FCNPolicy
@@ -22,5 +23,6 @@ __all__ = [
     "HindsightRelabelReplayBuffer",
     "LoopBreaker",
     "PixelDoubleDQN",
+    "QEnsemble",
     "QMapImageCallback",
 ]

@@ -8,7 +8,8 @@ plays the checkpoint under `sb3_pixeldqn.LoopBreaker`. A wrapper changes what th
 results with it get cells and labels of their own (`policy_label`: ``p_s+loop-breaker``). A leading
 ``LABEL=`` names the policy's results LABEL instead of the checkpoint's file stem
 (``"mine=runs/a/model.zip+loop-breaker"`` -> ``mine+loop-breaker``), so that two runs' ``model.zip`` can be
-evaluated side by side.
+evaluated side by side. A ``NAME.ensemble.json`` file (`write_ensemble`) names two or more checkpoints that act
+as one `sb3_pixeldqn.ensemble.QEnsemble` (greedy on the mean of their Q-maps); its label is ``NAME``.
 
 The product registers its own names and the loop breaker here; an experiment registers its own
 wrappers when it is imported (``research/fall_risk.py`` registers ``+fall-filter``), and the product
@@ -17,6 +18,7 @@ never imports an experiment. `check_policy` validates a name before any work sta
 
 from __future__ import annotations
 
+import json
 import os
 import pathlib
 import re
@@ -30,6 +32,7 @@ import numpy as np
 from sb3_pixeldqn.loop_breaker import LoopBreaker
 from shelf_env import params
 from shelf_env.baselines.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
+from shelf_env.files import write_json_atomically
 from shelf_env.privileged.lookahead import LookaheadAccessibility, LookaheadDistance
 from shelf_env.privileged.planning import PlanningTeacher
 
@@ -136,13 +139,62 @@ def policy_file(policy: str) -> str:
 
 
 def policy_files(policy: str) -> list[pathlib.Path]:
-    """The files a checkpoint policy reads: the checkpoint, then those of its wrappers (empty for a name)."""
+    """The files a checkpoint policy reads: the checkpoint (an ensemble's file, then its members), then those of
+    its wrappers (empty for a name)."""
     name, wrappers = policy_wrappers(policy)
     if name in POLICIES:
         return []
+    own = [pathlib.Path(name), *(ensemble_members(name) if is_ensemble(name) else [])]
     extra = [f for suffix in wrappers if WRAPPERS[suffix].files is not None
              for f in WRAPPERS[suffix].files(name)]  # type: ignore[misc]
-    return [pathlib.Path(name), *extra]
+    return [*own, *extra]
+
+
+#: How the file of an output ensemble of checkpoints ends (`write_ensemble`, `ensemble_members`).
+ENSEMBLE_SUFFIX = ".ensemble.json"
+
+
+def is_ensemble(name: str | os.PathLike) -> bool:
+    """Whether the policy file ``name`` is an ensemble's (ends with `ENSEMBLE_SUFFIX`)."""
+    return str(name).endswith(ENSEMBLE_SUFFIX)
+
+
+def ensemble_members(path: str | os.PathLike) -> list[pathlib.Path]:
+    """The checkpoints the ensemble file ``path`` names, in order (relative paths are read from its folder).
+
+    The file is JSON ``{"members": ["a.zip", "b.zip", ...]}`` with two or more members; a missing or malformed
+    file, or a member that is not a file, is a `ValueError` naming it."""
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise ValueError(f"ensemble {str(path)!r} is not a file")
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise ValueError(f"ensemble {path} is not readable JSON: {err}") from err
+    members = data.get("members") if isinstance(data, dict) else None
+    if not isinstance(members, list) or len(members) < 2 or not all(isinstance(m, str) and m for m in members):
+        raise ValueError(f"ensemble {path} must hold {{\"members\": [two or more checkpoint paths]}}, got {data!r}")
+    found = [path.parent / m for m in members]
+    missing = [str(m) for m in found if not m.is_file()]
+    if missing:
+        raise ValueError(f"ensemble {path} names checkpoints that are not files: {missing}")
+    return found
+
+
+def write_ensemble(path: str | os.PathLike, members: list[str | os.PathLike]) -> pathlib.Path:
+    """Write the ensemble file ``path`` (it must end with `ENSEMBLE_SUFFIX`) naming ``members`` (two or more
+    existing checkpoints), each stored relative to its folder; atomically, so a bad call leaves nothing."""
+    path = pathlib.Path(path)
+    if not is_ensemble(path):
+        raise ValueError(f"an ensemble file's name ends with {ENSEMBLE_SUFFIX!r}, got {str(path)!r}")
+    if len(members) < 2:
+        raise ValueError(f"an ensemble needs two or more members, got {len(members)}")
+    missing = [str(m) for m in members if not pathlib.Path(m).is_file()]
+    if missing:
+        raise ValueError(f"ensemble members are not files: {missing}")
+    folder = path.parent.resolve()
+    relative = [os.path.relpath(pathlib.Path(m).resolve(), folder) for m in members]
+    return write_json_atomically(path, {"members": relative})
 
 
 def is_named(policy: str) -> bool:
@@ -156,14 +208,22 @@ def policy_label(policy: str) -> str:
     label, rest = split_label(policy)
     name, wrappers = _strip_wrappers(rest)
     if label is None:
-        label = name if name in POLICIES else pathlib.Path(name).stem
+        file_name = pathlib.Path(name).name
+        label = (name if name in POLICIES else file_name[:-len(ENSEMBLE_SUFFIX)] if is_ensemble(name)
+                 else pathlib.Path(name).stem)
     return label + "".join(wrappers)
 
 
 def checkpoint_primitives(path: str | os.PathLike) -> tuple[str, ...]:
-    """The env primitives a PixelDoubleDQN checkpoint was trained with (from its map layout)."""
+    """The env primitives a PixelDoubleDQN checkpoint was trained with (from its map layout); of an ensemble,
+    those its members share (members with different layouts are a `ValueError`)."""
     from stable_baselines3.common.save_util import load_from_zip_file
 
+    if is_ensemble(path):
+        layouts = {str(m): checkpoint_primitives(m) for m in ensemble_members(path)}
+        if len(set(layouts.values())) > 1:
+            raise ValueError(f"ensemble {path} mixes checkpoints of different primitives: {layouts}")
+        return next(iter(layouts.values()))
     path = pathlib.Path(path)
     if not path.is_file():
         raise ValueError(f"policy {str(path)!r} is neither one of {tuple(POLICIES)} nor an existing checkpoint file")
@@ -177,9 +237,15 @@ def checkpoint_primitives(path: str | os.PathLike) -> tuple[str, ...]:
 
 
 def checkpoint_pixel_size(path: str | os.PathLike) -> float:
-    """The heightmap cell size (m) a PixelDoubleDQN checkpoint was trained at, from its observation width."""
+    """The heightmap cell size (m) a PixelDoubleDQN checkpoint was trained at, from its observation width (an
+    ensemble's: its members' one size; different sizes are a `ValueError`)."""
     from stable_baselines3.common.save_util import load_from_zip_file
 
+    if is_ensemble(path):
+        sizes = {str(m): checkpoint_pixel_size(m) for m in ensemble_members(path)}
+        if len(set(sizes.values())) > 1:
+            raise ValueError(f"ensemble {path} mixes checkpoints of different cell sizes: {sizes}")
+        return next(iter(sizes.values()))
     data, _, _ = load_from_zip_file(pathlib.Path(path), load_data=True, device="cpu")
     cols = int((data or {})["observation_space"].shape[2])
     return params.CABINET_WIDTH / cols
@@ -214,9 +280,12 @@ def make_policy(policy: str, env: gym.Env, seed: int = 0) -> Any:
     if name in POLICIES:
         agent = POLICIES[name](env, seed)
     else:
-        from sb3_pixeldqn import PixelDoubleDQN
+        from sb3_pixeldqn import PixelDoubleDQN, QEnsemble
 
-        agent = PixelDoubleDQN.load(name, env=env, device="cpu")
+        if is_ensemble(name):
+            agent = QEnsemble([PixelDoubleDQN.load(m, env=env, device="cpu") for m in ensemble_members(name)])
+        else:
+            agent = PixelDoubleDQN.load(name, env=env, device="cpu")
     for suffix in wrappers:
         agent = WRAPPERS[suffix].wrap(agent, env, name)
     return agent
