@@ -136,6 +136,15 @@ s1=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4=examples/pretrained/p_s.zip
 .venv/bin/shelf-evaluate --policies "$s1" --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test \
   --reuse-cells results/models_v3/open "$@"
 .venv/bin/python -m shelf_env.evaluation.falls "$s1" --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
+# the thirteenth session: the ninth point's seed-1 and seed-2 replicates (plain: the curve's points) on the same 90
+# scenes per N; the shipped model's falls at N = 8 under the loop breaker (the same 30 scenes)
+for m in p_s_dagger289_aug_mpa_r2_ce1_seed1 p_s_dagger289_aug_mpa_r2_ce1_seed2; do
+  [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
+  .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
+    --out results/distill_test "$@"
+done
+.venv/bin/python -m shelf_env.evaluation.falls "$s1+loop-breaker" --ns 8 --runs 30 --seed 0 \
+  --out results/distill_test/falls30.json
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
 .venv/bin/shelf-evaluate --policies "$d" "$d+loop-breaker" "$ps+loop-breaker" "$ps" examples/pretrained/s.zip h-d h-a \
   h-d+loop-breaker h-a+loop-breaker $M/p_s_d52sh_aug_mpa.zip $M/p_s_dagger7_aug_mpa.zip $M/p_s_dagger7_aug_mpa_r2_ce1.zip \
