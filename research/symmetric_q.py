@@ -28,7 +28,7 @@ import gymnasium as gym
 import numpy as np
 import torch as th
 
-from sb3_pixeldqn.policies import check_action_masks, masked_argmax
+from sb3_pixeldqn.policies import greedy_actions
 from shelf_env import policies
 from shelf_env.actions import ActionCodec
 from shelf_env.camera.heightmap import CLASS_RGB
@@ -104,11 +104,8 @@ class SymmetricQ:
         obs = np.asarray(observation)
         single = obs.ndim == len(self.observation_space.shape)
         batch = obs[None] if single else obs
-        n_actions = int(self.action_space.n)
-        masks = None if action_masks is None else th.as_tensor(check_action_masks(action_masks, n_actions, len(batch)))
         q = th.as_tensor(np.stack([self.q_maps(o).reshape(-1) for o in batch]))
-        actions = masked_argmax(q, masks).numpy()
-        return (actions[0] if single else actions), state
+        return greedy_actions(q, action_masks, single), state
 
 
 policies.register_wrapper(SYMMETRIC, lambda agent, env, base: SymmetricQ.for_env(agent, env))

@@ -25,7 +25,7 @@ import numpy as np
 import torch as th
 from gymnasium import spaces
 
-from sb3_pixeldqn.policies import check_action_masks, masked_argmax
+from sb3_pixeldqn.policies import greedy_actions
 
 
 class QEnsemble:
@@ -102,9 +102,4 @@ class QEnsemble:
         """Greedy action on the mean Q-maps for one observation ``(C, H, W)`` or a batch, within ``action_masks``."""
         obs = np.asarray(observation)
         single = obs.ndim == len(self.observation_space.shape)
-        q = self.q_values(obs)
-        masks = None
-        if action_masks is not None:
-            masks = th.as_tensor(check_action_masks(action_masks, int(self.action_space.n), q.shape[0]))
-        actions = masked_argmax(q, masks).numpy().reshape((-1,))
-        return (actions.squeeze(axis=0) if single else actions), state
+        return greedy_actions(self.q_values(obs), action_masks, single), state

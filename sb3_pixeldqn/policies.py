@@ -303,6 +303,17 @@ def masked_argmax(q: th.Tensor, action_masks: th.Tensor | None) -> th.Tensor:
     return q.masked_fill(~masks, -th.inf).argmax(dim=1)
 
 
+def greedy_actions(q: th.Tensor, action_masks: Any, single: bool) -> np.ndarray:
+    """``predict``'s answer from Q-values ``q`` ``(B, n)``: the argmax over the actions the user's ``action_masks``
+    allow (checked by `check_action_masks`; None: all), an int array ``(B,)``, or a 0-d array for one
+    observation (``single``). For test-time policies that combine Q-maps (`sb3_pixeldqn.QEnsemble`)."""
+    masks = None
+    if action_masks is not None:
+        masks = th.as_tensor(check_action_masks(action_masks, int(q.shape[1]), int(q.shape[0])), device=q.device)
+    actions = masked_argmax(q, masks).cpu().numpy().reshape((-1,))
+    return actions.squeeze(axis=0) if single else actions
+
+
 def check_action_masks(action_masks: Any, n_actions: int, batch: int) -> np.ndarray:
     """``action_masks`` as a ``(batch, n_actions)`` bool array, or a ValueError that names the problem:
     wrong dtype (it must be bool, True = allowed), wrong length, or a row that allows no action."""
