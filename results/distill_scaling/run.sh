@@ -153,7 +153,10 @@ for s in 1 2; do
   "$PY" -m shelf_env.cli.evaluate --policies "$M/p_s_dagger289_aug_mpa_r2_ce1_seed${s}_avg4.zip" --ns 5,8,11 --runs 30 \
     --seeds 3 --first-seed 2000 --object-sets ycb --workers 1 --out "$DIR/val90"
 done
-# ... and the three seeds' averaged models as one QEnsemble (greedy on the mean of their Q-maps), the same scenes
+# ... and the three seeds' averaged models as one QEnsemble (greedy on the mean of their Q-maps), the same scenes, beside
+# its third member (seed 0, the ninth point's averaged model) alone
+"$PY" -m shelf_env.cli.evaluate --policies "$M/p_s_dagger289_aug_mpa_r2_ce1_avg4.zip" --ns 5,8,11 --runs 30 --seeds 3 \
+  --first-seed 2000 --object-sets ycb --workers 1 --out "$DIR/val90"
 E=p_s_dagger289_aug_mpa_r2_ce1_ens3_avg4
 "$PY" -c "import sys; from shelf_env.policies import write_ensemble; write_ensemble(sys.argv[1], sys.argv[2:])" \
   "$M/$E.ensemble.json" "$M/p_s_dagger289_aug_mpa_r2_ce1_avg4.zip" "$M/p_s_dagger289_aug_mpa_r2_ce1_seed1_avg4.zip" \
@@ -163,5 +166,14 @@ E=p_s_dagger289_aug_mpa_r2_ce1_ens3_avg4
 "$PY" -m shelf_env.evaluation.compare "$DIR/val90" --pair p_s_dagger289_aug_mpa_r2_ce1_seed1_avg4 \
   p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 --pair p_s_dagger289_aug_mpa_r2_ce1_seed2_avg4 \
   p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 --pair $E p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 \
-  --pair $E p_s_dagger289_aug_mpa_r2_ce1_seed1_avg4 --pair $E p_s_dagger289_aug_mpa_r2_ce1_seed2_avg4 \
+  --pair $E p_s_dagger289_aug_mpa_r2_ce1_avg4 --pair $E p_s_dagger289_aug_mpa_r2_ce1_seed1_avg4 \
+  --pair $E p_s_dagger289_aug_mpa_r2_ce1_seed2_avg4 \
   --out "$DIR/val90_seeds.md"
+# every model's cells on the validation scenes aggregated into val90/results.json, results.csv and the plot
+V90=(p_s_dagger150_aug_mpa_r2_ce1_avg4 p_s_dagger150_aug_mpa_r2_ce1 p_s_dagger150_aug_mpa_r2_ce1_seed1_avg4
+  p_s_dagger150_aug_mpa_r2_ce1_seed1 p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 p_s_dagger201_aug_mpa_r2_ce1_avg4
+  p_s_dagger289_aug_mpa_r2_ce1_avg4 p_s_dagger289_aug_mpa_r2_ce1_seed1_avg4 p_s_dagger289_aug_mpa_r2_ce1_seed2_avg4)
+P=()
+for v in "${V90[@]}"; do P+=("$M/$v.zip"); done
+"$PY" -m shelf_env.cli.evaluate --policies "${P[@]}" "$M/$E.ensemble.json" --ns 5,8,11 \
+  --runs 30 --seeds 3 --first-seed 2000 --object-sets ycb --out "$DIR/val90" --summarize-only
