@@ -137,11 +137,13 @@ s1=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4=examples/pretrained/p_s.zip
   --reuse-cells results/models_v3/open "$@"
 .venv/bin/python -m shelf_env.evaluation.falls "$s1" --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
 # the thirteenth session: the ninth point's seed-1 and seed-2 replicates (plain: the curve's points) on the same 90
-# scenes per N; the shipped model's falls at N = 8 under the loop breaker (the same 30 scenes)
+# scenes per N and their falls at N = 8 (the first 30 scenes of seed 0); the shipped model's falls there under the
+# loop breaker
 for m in p_s_dagger289_aug_mpa_r2_ce1_seed1 p_s_dagger289_aug_mpa_r2_ce1_seed2; do
   [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
   .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
     --out results/distill_test "$@"
+  .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
 done
 .venv/bin/python -m shelf_env.evaluation.falls "$s1+loop-breaker" --ns 8 --runs 30 --seed 0 \
   --out results/distill_test/falls30.json
@@ -154,7 +156,8 @@ done
   $M/p_s_dagger150_aug_mpa_r2_ce1_avg4.zip $M/p_s_dagger201_aug_mpa_r2_ce1.zip $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip \
   $M/p_s_dagger269_aug_mpa_r2_ce1.zip $M/p_s_dagger269_aug_mpa_r2_ce1_avg4.zip $M/p_s_dagger269_aug_mpa_r2_ce1_seed1.zip \
   $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip+loop-breaker $M/p_s_dagger289_aug_mpa_r2_ce1.zip \
-  $M/p_s_dagger289_aug_mpa_r2_ce1_avg4.zip "$s1" --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
+  $M/p_s_dagger289_aug_mpa_r2_ce1_avg4.zip "$s1" $M/p_s_dagger289_aug_mpa_r2_ce1_seed1.zip \
+  $M/p_s_dagger289_aug_mpa_r2_ce1_seed2.zip --ns 5,8,11 --runs 30 --seeds 1 --object-sets ycb --out results/distill_test --summarize-only
 # the held-out scaling curve: falls and SR on the first 10 scenes per N (falls.json), and each model's SR and
 # margin over the better heuristic on every evaluation scene it played (90 per N for the cross-entropy models)
 .venv/bin/python research/scaling_curve.py results/distill_test --reports results/distill_scaling \
