@@ -6,10 +6,11 @@ import json
 import gymnasium as gym
 import numpy as np
 import pytest
-
 from pixel_envs import FindTheSquareEnv
+
 from sb3_pixeldqn import LoopBreaker, PixelDoubleDQN, QEnsemble
 from shelf_env import policies
+from shelf_env.cli import demo
 from shelf_env.evaluation import protocol as ev
 
 SMALL = dict(widths=(4, 8, 8))
@@ -104,7 +105,11 @@ def test_an_ensemble_file_is_a_policy_the_evaluation_plays(checkpoints):
         assert ev.greedy_action(env, agent, obs, True, True, False) == int(np.where(masks, mean, -np.inf).argmax())
         record = ev.run_episode(env, agent, ev.scene_seed(0, 2, 0), max_actions=3)
         assert record["actions"] >= 1
-        assert isinstance(ev.make_policy(policy + ev.LOOP_BREAKER, env), LoopBreaker)
+        wrapped = ev.make_policy(policy + ev.LOOP_BREAKER, env)
+        assert isinstance(wrapped, LoopBreaker)
+        # the demo overlays the ensemble's mean maps, bare or through the breaker
+        assert demo.q_map_values_of(wrapped)(obs).shape == (1, *obs.shape[1:])
+        np.testing.assert_allclose(demo.q_map_values_of(agent)(obs).reshape(-1), mean, rtol=1e-5, atol=1e-6)
     finally:
         env.close()
 

@@ -115,11 +115,12 @@ def frame(scene: np.ndarray, obs: np.ndarray, q: np.ndarray | None, allowed: np.
 
 
 def q_map_values_of(agent: Any) -> Any:
-    """The Q-map function (``obs -> (maps, rows, cols)``) of a checkpoint's network, looked up through
-    a `LoopBreaker` (which wraps the model: the overlay shows the model's own values, and the marked
-    cell is what the breaker let it do); None for a heuristic."""
+    """The Q-map function (``obs -> (maps, rows, cols)``) of a checkpoint's network, or an ensemble's mean maps
+    (`sb3_pixeldqn.QEnsemble`), looked up through a `LoopBreaker` (which wraps the model: the overlay shows the
+    model's own values, and the marked cell is what the breaker let it do); None for a heuristic."""
     inner = agent.policy if isinstance(agent, LoopBreaker) else agent
-    return getattr(getattr(inner, "policy", None), "q_map_values", None)
+    own = getattr(inner, "q_map_values", None)
+    return own if own is not None else getattr(getattr(inner, "policy", None), "q_map_values", None)
 
 
 def run(policy: str, n: int, seed: int, object_set: str, out: pathlib.Path, max_actions: int = params.MAX_ACTIONS,
