@@ -197,6 +197,15 @@ def write_ensemble(path: str | os.PathLike, members: list[str | os.PathLike]) ->
     return write_json_atomically(path, {"members": relative})
 
 
+def _members_agree(path: str | os.PathLike, read: Callable[[pathlib.Path], Any], what: str) -> Any:
+    """``read`` of the members of the ensemble file ``path``: one value they share, or a `ValueError` naming ``what``
+    differs between them."""
+    found = {str(m): read(m) for m in ensemble_members(path)}
+    if len(set(found.values())) > 1:
+        raise ValueError(f"ensemble {path} mixes checkpoints of different {what}: {found}")
+    return next(iter(found.values()))
+
+
 def is_named(policy: str) -> bool:
     """Whether ``policy`` is a registered name (wrapped or not), not a checkpoint."""
     return policy_file(policy) in POLICIES
@@ -207,10 +216,10 @@ def policy_label(policy: str) -> str:
     file stem; then its wrappers."""
     label, rest = split_label(policy)
     name, wrappers = _strip_wrappers(rest)
-    if label is None:
-        file_name = pathlib.Path(name).name
-        label = (name if name in POLICIES else file_name[:-len(ENSEMBLE_SUFFIX)] if is_ensemble(name)
-                 else pathlib.Path(name).stem)
+    if label is None and name in POLICIES:
+        label = name
+    elif label is None:
+        label = pathlib.Path(name).name[:-len(ENSEMBLE_SUFFIX)] if is_ensemble(name) else pathlib.Path(name).stem
     return label + "".join(wrappers)
 
 
@@ -220,10 +229,7 @@ def checkpoint_primitives(path: str | os.PathLike) -> tuple[str, ...]:
     from stable_baselines3.common.save_util import load_from_zip_file
 
     if is_ensemble(path):
-        layouts = {str(m): checkpoint_primitives(m) for m in ensemble_members(path)}
-        if len(set(layouts.values())) > 1:
-            raise ValueError(f"ensemble {path} mixes checkpoints of different primitives: {layouts}")
-        return next(iter(layouts.values()))
+        return _members_agree(path, checkpoint_primitives, "primitives")
     path = pathlib.Path(path)
     if not path.is_file():
         raise ValueError(f"policy {str(path)!r} is neither one of {tuple(POLICIES)} nor an existing checkpoint file")
@@ -242,10 +248,7 @@ def checkpoint_pixel_size(path: str | os.PathLike) -> float:
     from stable_baselines3.common.save_util import load_from_zip_file
 
     if is_ensemble(path):
-        sizes = {str(m): checkpoint_pixel_size(m) for m in ensemble_members(path)}
-        if len(set(sizes.values())) > 1:
-            raise ValueError(f"ensemble {path} mixes checkpoints of different cell sizes: {sizes}")
-        return next(iter(sizes.values()))
+        return _members_agree(path, checkpoint_pixel_size, "cell sizes")
     data, _, _ = load_from_zip_file(pathlib.Path(path), load_data=True, device="cpu")
     cols = int((data or {})["observation_space"].shape[2])
     return params.CABINET_WIDTH / cols
