@@ -12,28 +12,22 @@ cost from those states, so that the share the ensemble adds to an episode shows.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
-from collections.abc import Callable, Sequence
-from typing import Any
+from pathlib import Path
 
 import gymnasium as gym
 import torch
 
-import shelf_env  # noqa: F401  (registers ShelfSort-v0)
-from sb3_pixeldqn import PixelDoubleDQN, QEnsemble
-from shelf_env.evaluation.protocol import scene_seed
-from shelf_env.policies import checkpoint_pixel_size
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import shelf_env  # noqa: E402, F401  (registers ShelfSort-v0)
+from benchmarks.timing import seconds_per_call  # noqa: E402
+from sb3_pixeldqn import PixelDoubleDQN, QEnsemble  # noqa: E402
+from shelf_env.evaluation.protocol import scene_seed  # noqa: E402
+from shelf_env.policies import checkpoint_pixel_size  # noqa: E402
 
 SHIPPED = ["examples/pretrained/p_s.zip", "examples/pretrained/v2/p_s.zip", "examples/pretrained/v1/p_s.zip"]
-
-
-def seconds_per_call(call: Callable[[Any], Any], items: Sequence[Any]) -> float:
-    """Mean wall seconds of ``call(item)`` over ``items``, after one warm-up call."""
-    call(items[0])
-    start = time.perf_counter()
-    for item in items:
-        call(item)
-    return (time.perf_counter() - start) / len(items)
 
 
 def main() -> None:

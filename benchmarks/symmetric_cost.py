@@ -21,19 +21,11 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.timing import seconds_per_call  # noqa: E402
 from research.symmetric_q import SymmetricQ  # noqa: E402
 from sb3_pixeldqn import PixelDoubleDQN  # noqa: E402
 from shelf_env.evaluation.protocol import scene_seed  # noqa: E402
 from shelf_env.policies import checkpoint_pixel_size  # noqa: E402
-
-
-def timed(call, items) -> float:
-    """Mean seconds of ``call(item)`` over ``items`` after one warm-up call."""
-    call(items[0])
-    start = time.perf_counter()
-    for item in items:
-        call(item)
-    return (time.perf_counter() - start) / len(items)
 
 
 def main() -> None:
@@ -55,8 +47,8 @@ def main() -> None:
                 obs, _ = env.reset(seed=scene_seed(0, n, run))
                 states.append((obs, env.unwrapped.action_masks()))
             sym = SymmetricQ.for_env(model, env)
-            plain_s = timed(lambda s: model.predict(s[0], deterministic=True, action_masks=s[1]), states)
-            sym_s = timed(lambda s, sym=sym: sym.predict(s[0], action_masks=s[1]), states)
+            plain_s = seconds_per_call(lambda s: model.predict(s[0], deterministic=True, action_masks=s[1]), states)
+            sym_s = seconds_per_call(lambda s, sym=sym: sym.predict(s[0], action_masks=s[1]), states)
             differ = sum(int(model.predict(o, deterministic=True, action_masks=m)[0])
                          != int(sym.predict(o, action_masks=m)[0]) for o, m in states)
             steps = []
