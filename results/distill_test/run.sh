@@ -123,8 +123,10 @@ b=p_s_dagger201_aug_mpa_r2_ce1_avg4
 .venv/bin/python -m shelf_env.evaluation.compare results/distill_test --pair "$b+loop-breaker" $b \
   --pair "$b+loop-breaker" h-d --pair "$b+loop-breaker" h-a --pair "$b+loop-breaker" h-d+loop-breaker \
   --pair "$b+loop-breaker" h-a+loop-breaker --out results/distill_test/paired_loop_breaker.md
-# the twelfth session: the ninth point (all 344 shards at its start), plain and averaged, the same way
-for m in p_s_dagger289_aug_mpa_r2_ce1 p_s_dagger289_aug_mpa_r2_ce1_avg4; do
+# the twelfth session: the ninth point (all 344 shards at its start), plain and averaged, the same way; the thirteenth:
+# its seed-1 and seed-2 replicates (plain: the curve's points)
+for m in p_s_dagger289_aug_mpa_r2_ce1 p_s_dagger289_aug_mpa_r2_ce1_avg4 p_s_dagger289_aug_mpa_r2_ce1_seed1 \
+    p_s_dagger289_aug_mpa_r2_ce1_seed2; do
   [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
   .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
     --out results/distill_test "$@"
@@ -136,15 +138,7 @@ s1=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4=examples/pretrained/p_s.zip
 .venv/bin/shelf-evaluate --policies "$s1" --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test \
   --reuse-cells results/models_v3/open "$@"
 .venv/bin/python -m shelf_env.evaluation.falls "$s1" --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
-# the thirteenth session: the ninth point's seed-1 and seed-2 replicates (plain: the curve's points) on the same 90
-# scenes per N and their falls at N = 8 (the first 30 scenes of seed 0); the shipped model's falls there under the
-# loop breaker
-for m in p_s_dagger289_aug_mpa_r2_ce1_seed1 p_s_dagger289_aug_mpa_r2_ce1_seed2; do
-  [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
-  .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
-    --out results/distill_test "$@"
-  .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
-done
+# ... (thirteenth session) and its falls at N = 8 under the loop breaker
 .venv/bin/python -m shelf_env.evaluation.falls "$s1+loop-breaker" --ns 8 --runs 30 --seed 0 \
   --out results/distill_test/falls30.json
 # every policy's cells aggregated into results.json / results.csv / the plot (each run above wrote its own only)
