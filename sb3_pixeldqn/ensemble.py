@@ -7,7 +7,7 @@ damps what one seed got wrong: the standard output ensemble of value-based RL. I
 average (a "soup"): every member runs its own network, so it costs one forward pass per member.
 
 - Members are `PixelDoubleDQN` models (or anything with the same ``policy``: `FCNPolicy`'s
-  ``obs_to_tensor``, ``images``, ``all_q_maps`` and ``q_net``) with one observation space, one action
+  ``obs_to_tensor`` and ``all_q_values``) with one observation space, one action
   space and the same maps. Their raw Q-values are averaged with equal weights (or ``weights``), so
   members should share a value scale: the same reward, recipe and start.
 - ``predict`` has SB3's signature with sb3-contrib's ``action_masks``: the argmax is over the allowed
@@ -77,7 +77,7 @@ class QEnsemble:
             policy = model.policy
             policy.set_training_mode(False)
             obs_tensor, _ = policy.obs_to_tensor(observation)
-            q = policy.all_q_maps(policy.q_net, policy.images(obs_tensor)).flatten(1).float().cpu()
+            q = policy.all_q_values(obs_tensor).float().cpu()
             total = q * float(weight) if total is None else total + q * float(weight)
         assert total is not None  # at least two members
         return total

@@ -221,8 +221,11 @@ class FCNPolicy(BasePolicy):
     def _predict(
         self, observation: PyTorchObs, deterministic: bool = True, action_masks: th.Tensor | None = None
     ) -> th.Tensor:
-        q = self.all_q_maps(self.q_net, self.images(observation)).flatten(1)
-        return masked_argmax(q, action_masks)
+        return masked_argmax(self.all_q_values(observation), action_masks)
+
+    def all_q_values(self, observation: PyTorchObs) -> th.Tensor:
+        """Every online Q-value of each observation, ``(B, n_maps * H * W)`` in action order, without gradients."""
+        return self.all_q_maps(self.q_net, self.images(observation)).flatten(1)
 
     def predict(
         self,
@@ -241,16 +244,7 @@ class FCNPolicy(BasePolicy):
         self.set_training_mode(False)
         obs_tensor, vectorized_env = self.obs_to_tensor(observation)
         assert isinstance(obs_tensor, th.Tensor)  # check_spaces allows Box observations only
-        masks = None
-        if action_masks is not None:
-            masks = th.as_tensor(check_action_masks(action_masks, int(self.action_space.n), obs_tensor.shape[0]),
-                                 device=self.device)
-        with th.no_grad():
-            chosen = self._predict(obs_tensor, deterministic=deterministic, action_masks=masks)
-        actions = chosen.cpu().numpy().reshape((-1,))
-        if not vectorized_env:
-            actions = actions.squeeze(axis=0)
-        return actions, state
+        return greedy_actions(self.all_q_values(obs_tensor), action_masks, not vectorized_env), state
 
     def q_for_loss(
         self, images: th.Tensor, actions: th.Tensor, full_rows: th.Tensor
@@ -306,7 +300,8 @@ def masked_argmax(q: th.Tensor, action_masks: th.Tensor | None) -> th.Tensor:
 def greedy_actions(q: th.Tensor, action_masks: Any, single: bool) -> np.ndarray:
     """``predict``'s answer from Q-values ``q`` ``(B, n)``: the argmax over the actions the user's ``action_masks``
     allow (checked by `check_action_masks`; None: all), an int array ``(B,)``, or a 0-d array for one
-    observation (``single``). For test-time policies that combine Q-maps (`sb3_pixeldqn.QEnsemble`)."""
+    observation (``single``). `FCNPolicy.predict` answers with it, and so do test-time policies that combine
+    Q-maps (`sb3_pixeldqn.QEnsemble`)."""
     masks = None
     if action_masks is not None:
         masks = th.as_tensor(check_action_masks(action_masks, int(q.shape[1]), int(q.shape[0])), device=q.device)
