@@ -25,7 +25,8 @@ reward. This module learns the risk directly, as a supervised problem with dense
   it; the labels it learned from came from the simulator, in training only.
 
 Commands (``python -m research.fall_risk -h``): ``collect`` (resumable, one file per episode,
-shardable over processes), ``train``, ``check`` (`greedy_check`). Evaluations name a filtered
+shardable over processes), ``train`` (on those episodes, or on the pick labels of the teacher dataset,
+`shelf_env.privileged.dataset`), ``threshold`` (`rethreshold`), ``check`` (`greedy_check`). Evaluations name a filtered
 checkpoint ``<checkpoint>+fall-filter``: importing this module registers that wrapper
 (`shelf_env.policies`), which loads the model ``<stem>.fall_risk.pt`` beside the checkpoint
 (`fall_filter_path`); ``python -m research.evaluate`` is shelf-evaluate with it registered.
@@ -202,7 +203,8 @@ def load_dataset(folder: pathlib.Path) -> list[dict[str, np.ndarray]]:
     """Every collected episode of ``folder`` (sorted by name), as dicts of ``obs`` and ``probes``."""
     files = sorted(folder.glob("shard*_ep*.npz"))
     if not files:
-        raise ValueError(f"no collected episodes (shard*_ep*.npz) in {folder}")
+        raise ValueError(f"no collected episodes (shard*_ep*.npz) and no teacher dataset shards (sNN_NNNNN.npz) "
+                         f"in {folder}")
     episodes = []
     for f in files:
         with np.load(f) as data:
@@ -277,6 +279,56 @@ def make_split(episodes: list[dict[str, np.ndarray]]) -> Split:
     return Split(th.cat(obs), th.cat(state), th.cat(cell), th.cat(label))
 
 
+
+def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
+    """The pick labels of the teacher dataset's states ``states`` (indices over ``shards`` in order,
+    `shelf_env.training.distill.split_by_scene`'s): label 1 where the pick ended the episode invalid
+    (``label_valid`` false: an object fell or the scene did not come to rest). Pushes are left out:
+    the filter masks picks."""
+    obs, state, cell, label, first = [], [], [], [], 0
+    local = np.full(sum(s.num_states for s in shards), -1, np.int64)
+    local[states] = np.arange(len(states))
+    for shard in shards:
+        a = shard.arrays
+        cells = int(np.prod(a["obs"].shape[-2:]))
+        pick = list(shard.meta["layout"]["map_names"]).index("pick")
+        mine = local[first:first + shard.num_states]
+        keep = (mine[a["label_state"]] >= 0) & (a["label_action"] // cells == pick)
+        obs.append(a["obs"][mine >= 0])
+        state.append(mine[a["label_state"][keep]])
+        cell.append(a["label_action"][keep] % cells)
+        label.append(~a["label_valid"][keep].astype(bool))
+        first += shard.num_states
+    return Split(th.as_tensor(np.concatenate(obs)), th.as_tensor(np.concatenate(state)),
+                 th.as_tensor(np.concatenate(cell)), th.as_tensor(np.concatenate(label), dtype=th.float32))
+
+
+def load_splits(data: pathlib.Path, val_fraction: float, max_shards: str | None = None) -> tuple[Split, Split]:
+    """The training and held-out splits of ``data``: a teacher dataset (``sNN_NNNNN.npz`` shards,
+    `shelf_env.privileged.dataset`; split by scene as the distillation splits it, ``max_shards`` as its
+    ``--max-shards``) or a folder of collected episodes (`collect`; the last ``val_fraction`` of the
+    episodes by file name held out)."""
+    from shelf_env.privileged import dataset
+
+    if not 0 < val_fraction < 1:
+        raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
+    if dataset.shard_files(data):
+        from shelf_env.training.distill import select_shards, split_by_scene
+
+        shards = select_shards(dataset.load_dataset(data), max_shards)
+        train, val = split_by_scene(shards, val_fraction)
+        if not val:
+            raise ValueError(f"{data}: {len(shards)} shards leave no held-out scene at val_fraction {val_fraction}")
+        return teacher_split(shards, np.array(train)), teacher_split(shards, np.array(val))
+    if max_shards is not None:
+        raise ValueError(f"max_shards selects a teacher dataset's shards; {data} holds none (sNN_NNNNN.npz)")
+    episodes = load_dataset(data)
+    n_val = max(1, int(round(len(episodes) * val_fraction)))
+    if len(episodes) - n_val < 1:
+        raise ValueError(f"{data} has {len(episodes)} episodes with states; need at least 2 for a held-out split")
+    return make_split(episodes[:-n_val]), make_split(episodes[-n_val:])
+
+
 def logits_at(model: FallRiskModel, obs: th.Tensor, index: th.Tensor, cells: th.Tensor,
               mirror: bool = False) -> th.Tensor:
     """The model's logit at each (observation ``obs[index[k]]``, flat cell ``cells[k]``), one FCN pass
@@ -326,22 +378,44 @@ def pick_threshold(labels: np.ndarray, p: np.ndarray) -> float:
     return best_t
 
 
+def recall_threshold(labels: np.ndarray, p: np.ndarray, recall: float) -> float:
+    """The highest threshold (on a grid of 0.01) that still flags at least ``recall`` of the falls:
+    the filter that keeps the most safe picks among those that catch that share of the falls."""
+    if not 0 < recall <= 1:
+        raise ValueError(f"recall must be in (0, 1], got {recall}")
+    pos = p[labels == 1]
+    if not len(pos):
+        raise ValueError("no fall among the held-out labels: no threshold reaches a recall")
+    grid = np.round(np.arange(0.01, 1.0, 0.01), 2)
+    ok = [t for t in grid if (pos >= t).mean() >= recall]
+    return float(max(ok)) if ok else float(grid[0])
+
+
+def threshold_report(labels: np.ndarray, p: np.ndarray, threshold: float) -> dict[str, float]:
+    """The recall of falls and of safe picks at ``threshold`` (NaN where the labels hold none)."""
+    flagged = p >= threshold
+    return {"threshold": threshold,
+            "val_recall_invalid": float(flagged[labels == 1].mean()) if (labels == 1).any() else float("nan"),
+            "val_recall_valid": float((~flagged[labels == 0]).mean()) if (labels == 0).any() else float("nan")}
+
+
 def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = None, epochs: int = 8,
-                    batch: int = 32, lr: float = 3e-4, val_fraction: float = 0.15, seed: int = 0) -> dict[str, Any]:
-    """Fit a `FallRiskModel` on the episodes of ``data`` (see the module docstring) and save it to
-    ``out``. The last ``val_fraction`` of the episodes (by file name) are held out: the epoch whose
-    weights rank their probes best (AUC) is kept and the threshold is chosen there. The returned
-    report (also the file's ``info``) gives their AUC and the recall of falls and of safe picks at
-    the threshold. ``init``: a P+S / S zip whose pick FCN starts the model."""
+                    batch: int = 32, lr: float = 3e-4, val_fraction: float = 0.15, seed: int = 0,
+                    max_shards: str | None = None, recall: float | None = None) -> dict[str, Any]:
+    """Fit a `FallRiskModel` on ``data`` (see the module docstring; `load_splits`: collected episodes,
+    or a teacher dataset's pick labels) and save it to ``out``. The held-out split (the last
+    ``val_fraction`` of the episodes, or of each series' scenes) chooses the epoch whose weights rank
+    its labels best (AUC) and the threshold: the best balanced accuracy, or with ``recall`` the highest
+    that flags that share of the held-out falls (`recall_threshold`). The returned report (also the
+    file's ``info``) gives their AUC and the recall of falls and of safe picks at the threshold.
+    ``init``: a P+S / S zip whose pick FCN starts the model."""
     if epochs < 1 or batch < 1 or not 0 < val_fraction < 1:
         raise ValueError(f"need epochs >= 1, batch >= 1 and 0 < val_fraction < 1; got {epochs}, {batch}, "
                          f"{val_fraction}")
+    if recall is not None and not 0 < recall <= 1:
+        raise ValueError(f"recall must be in (0, 1], got {recall}")
     th.manual_seed(seed)
-    episodes = load_dataset(data)
-    n_val = max(1, int(round(len(episodes) * val_fraction)))
-    if len(episodes) - n_val < 1:
-        raise ValueError(f"{data} has {len(episodes)} episodes with states; need at least 2 for a held-out split")
-    train, val = make_split(episodes[:-n_val]), make_split(episodes[-n_val:])
+    train, val = load_splits(data, val_fraction, max_shards)
     model = FallRiskModel(int(train.obs.shape[1]))
     if init is not None:
         from sb3_pixeldqn import PixelDoubleDQN
@@ -385,14 +459,12 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
     if best[2]:  # (with no held-out fall to rank, the AUC is undefined and the last epoch stays)
         model.load_state_dict(best[2])
     p, labels = scores(model, val), val.label.numpy()
-    model.threshold = pick_threshold(labels, p)
-    flagged = p >= model.threshold
-    report = {"obs_shape": list(train.obs.shape[1:]),
+    model.threshold = pick_threshold(labels, p) if recall is None else recall_threshold(labels, p, recall)
+    report = {"obs_shape": list(train.obs.shape[1:]), "data": str(data), "max_shards": max_shards,
+              "val_fraction": val_fraction, "recall_target": recall,
               "train_states": len(train.obs), "train_probes": len(train.label), "train_invalid": int(train.label.sum()),
               "val_states": len(val.obs), "val_probes": len(labels), "val_invalid": int(labels.sum()),
-              "val_auc": auc(labels, p), "threshold": model.threshold,
-              "val_recall_invalid": float(flagged[labels == 1].mean()) if (labels == 1).any() else float("nan"),
-              "val_recall_valid": float((~flagged[labels == 0]).mean()) if (labels == 0).any() else float("nan"),
+              "val_auc": auc(labels, p), **threshold_report(labels, p, model.threshold),
               "epochs": epochs, "best_epoch": best[1],
               "init": init, "history": history}
     model.save(out, report)
@@ -400,31 +472,47 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
 
 
 def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
-                 val_fraction: float = 0.15) -> dict[str, Any]:
-    """What the filter does to a model's choice on the held-out episodes of ``data`` (the split of
-    `train_fall_risk`): at each state, the pick the model values most among the probed cells, and
-    the one it values most among those the filter keeps (itself where none is kept), with the
-    share of each that ended the episode invalid in the forked copy, beside the share of all probes."""
+                 val_fraction: float | None = None) -> dict[str, Any]:
+    """What the filter does to a model's choice on the held-out split of ``data`` (`load_splits`, with the
+    ``val_fraction`` and ``max_shards`` the fall-risk model was trained with, so the same split): at
+    each state, the pick the model values most among the labelled cells, and the one it values most
+    among those the filter keeps (itself where none is kept), with the share of each that ended the
+    episode invalid in the forked copy, beside the share of all labelled picks."""
     from sb3_pixeldqn import PixelDoubleDQN
 
-    episodes = load_dataset(data)
-    val = episodes[-max(1, int(round(len(episodes) * val_fraction))):]
+    info = getattr(risk, "info", {})
+    fraction = val_fraction if val_fraction is not None else float(info.get("val_fraction", 0.15))
+    _, val = load_splits(data, fraction, info.get("max_shards"))
     model = PixelDoubleDQN.load(checkpoint, device="cpu")
     pick = [name for name, _ in model.policy.maps].index("pick")
-    greedy, filtered, states = [], [], 0
-    for ep in val:
-        for t, obs in enumerate(ep["obs"]):
-            probes = ep["probes"][ep["probes"][:, 0] == t]
-            if not len(probes):
-                continue
-            q = model.policy.q_map_values(obs)[pick][probes[:, 1], probes[:, 2]]
-            kept = risk.risk(obs)[probes[:, 1], probes[:, 2]] < risk.threshold
-            greedy.append(probes[int(np.argmax(q)), 3])
-            filtered.append(probes[int(np.argmax(np.where(kept, q, -np.inf))), 3] if kept.any() else greedy[-1])
-            states += 1
-    labels = np.concatenate([ep["probes"][:, 3] for ep in val])
-    return {"checkpoint": checkpoint, "val_states": states, "probes_invalid": float(labels.mean()),
-            "greedy_invalid": float(np.mean(greedy)), "filtered_invalid": float(np.mean(filtered))}
+    labels, cells, states = val.label.numpy(), val.cell.numpy(), val.state.numpy()
+    greedy, filtered = [], []
+    for t in np.unique(states):
+        mine = states == t
+        obs = val.obs[int(t)].numpy()
+        q = model.policy.q_map_values(obs)[pick].reshape(-1)[cells[mine]]
+        kept = risk.risk(obs).reshape(-1)[cells[mine]] < risk.threshold
+        outcome = labels[mine]
+        greedy.append(outcome[int(np.argmax(q))])
+        filtered.append(outcome[int(np.argmax(np.where(kept, q, -np.inf)))] if kept.any() else greedy[-1])
+    return {"checkpoint": checkpoint, "threshold": risk.threshold, "val_states": len(greedy),
+            "probes_invalid": float(labels.mean()), "greedy_invalid": float(np.mean(greedy)),
+            "filtered_invalid": float(np.mean(filtered))}
+
+
+def rethreshold(model_path: pathlib.Path, data: pathlib.Path, recall: float, out: pathlib.Path) -> dict[str, Any]:
+    """Save a copy of the fall-risk model at ``model_path`` to ``out`` whose threshold flags ``recall`` of
+    the held-out falls of ``data`` (the split it was trained with; `recall_threshold`), so that two
+    filters of one training can be played side by side (each ``<stem>.fall_risk.pt`` beside its own
+    checkpoint copy). Returns the copy's ``info``."""
+    risk = FallRiskModel.load(model_path)
+    _, val = load_splits(data, float(risk.info.get("val_fraction", 0.15)), risk.info.get("max_shards"))
+    p, labels = scores(risk, val), val.label.numpy()
+    risk.threshold = recall_threshold(labels, p, recall)
+    info = {**risk.info, "recall_target": recall, **threshold_report(labels, p, risk.threshold),
+            "rethresholded_from": str(model_path)}
+    risk.save(out, info)
+    return info
 
 
 class FallFilter:
@@ -523,6 +611,17 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--init", default="examples/pretrained/v1/p_s.zip", help="zip whose pick FCN starts it ('none')")
     t.add_argument("--epochs", type=int, default=8)
     t.add_argument("--batch", type=int, default=32)
+    t.add_argument("--val-fraction", type=float, default=0.15,
+                   help="held-out share: of the episodes, or of each series' scenes of a teacher dataset")
+    t.add_argument("--max-shards", default=None, help="a teacher dataset's shards to use (the distillation's option)")
+    t.add_argument("--recall", type=float, default=None,
+                   help="threshold: the highest that flags this share of the held-out falls (default: the best "
+                        "balanced accuracy)")
+    r = sub.add_parser("threshold", help="a copy of a fall-risk model with the threshold of another recall")
+    r.add_argument("--data", type=pathlib.Path, required=True)
+    r.add_argument("--model", type=pathlib.Path, required=True)
+    r.add_argument("--recall", type=float, required=True)
+    r.add_argument("--out", type=pathlib.Path, required=True)
     k = sub.add_parser("check", help="the filter's effect on a model's choice among the probed picks, held out")
     k.add_argument("--data", type=pathlib.Path, required=True)
     k.add_argument("--model", type=pathlib.Path, required=True, help="the fall-risk model (.pt)")
@@ -539,9 +638,13 @@ def main(argv: list[str] | None = None) -> int:
             model = None if args.model == "none" else args.model
             collect(args.out, args.episodes, args.shard, tuple(args.ns), model, args.object_set, args.explore,
                     args.hours)
+        elif args.command == "threshold":
+            info = rethreshold(args.model, args.data, args.recall, args.out)
+            print(json.dumps({k: v for k, v in info.items() if k != "history"}, indent=1))
         else:
             init = None if args.init == "none" else args.init
-            report = train_fall_risk(args.data, args.out, init, args.epochs, args.batch)
+            report = train_fall_risk(args.data, args.out, init, args.epochs, args.batch, val_fraction=args.val_fraction,
+                                     max_shards=args.max_shards, recall=args.recall)
             print(json.dumps({k: v for k, v in report.items() if k != "history"}, indent=1))
     except ValueError as err:
         print(f"python -m research.fall_risk {args.command}: {err}", file=sys.stderr)
