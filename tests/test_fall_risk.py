@@ -7,6 +7,7 @@ import json
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch as th
 from gymnasium import spaces
 
 from research import fall_risk as fr
@@ -97,6 +98,95 @@ def test_training_learns_a_cellwise_rule_and_chooses_its_threshold_on_held_out_e
     with pytest.raises(ValueError, match="no collected episodes"):
         fr.train_fall_risk(tmp_path, tmp_path / "x.pt")
     assert not (tmp_path / "x.pt").exists()
+
+
+def synthetic_teacher_shards(folder, shards=2, episodes=6, states=6, seed=0):
+    """A teacher dataset (`shelf_env.privileged.dataset` shards, series 0) with `synthetic_episodes`'s rule for
+    picks (invalid where channel 0 is dark) and push labels that are all invalid at the same cells, so a
+    split that let a push through would be seen in its labels and its AUC."""
+    from shelf_env.privileged import dataset
+
+    rng = np.random.default_rng(seed)
+    folder.mkdir(parents=True)
+    centres = [(r, c) for r in range(2, 16, 4) for c in range(2, 24, 4)]
+    rows, cols = 20, 30  # the env's cells at pixel_size 0.02
+    layout = {"obs_shape": [4, rows, cols], "pixel_size": 0.02, "map_names": ["pick", "push_left", "push_right"]}
+    for k in range(shards):
+        eps = []
+        for _ in range(episodes):
+            ep = dataset.Episode()
+            for t in range(states):
+                obs = np.full((4, rows, cols), 255, np.uint8)
+                for i in rng.permutation(len(centres))[:8]:
+                    r, c = centres[i]
+                    dark = bool(rng.random() < 0.3)
+                    obs[0, r - 1:r + 2, c - 1:c + 2] = 0 if dark else 255
+                    for m in (0, 1):  # the pick, and a push at the same cell (never valid)
+                        valid = not dark if m == 0 else False
+                        for key, v in zip(dataset.LABEL_KEYS, (t, m * rows * cols + r * cols + c, valid, not valid,
+                                                               False, 0, 2)):
+                            ep.labels[key].append(v)
+                ep.obs.append(obs)
+                for key, v in zip(dataset.EPISODE_STATE_KEYS, (t, 0, np.nan, 0)):
+                    ep.states[key].append(v)
+            eps.append(ep)
+        meta = {"format": dataset.FORMAT, "dynamics_version": dataset.DYNAMICS_VERSION, "layout": layout,
+                "series": 0, "shard": k, "episodes": [{}] * episodes}
+        dataset.save_shard(folder / f"s00_{k:05d}.npz", meta, eps, layout["obs_shape"])
+
+
+def test_training_on_a_teacher_dataset_reads_its_pick_labels_split_by_scene(tmp_path):
+    """The teacher dataset's pick labels (pushes left out), held out by scene as the distillation holds them
+    out; the recall threshold flags that share of the held-out falls, `rethreshold` writes a copy with
+    another threshold, and the greedy check reads the same split."""
+    synthetic_teacher_shards(tmp_path / "data")
+    train, val = fr.load_splits(tmp_path / "data", 0.25)
+    assert len(train.obs) == 54 and len(val.obs) == 18  # 3 of 12 scenes held out (the last of series 0)
+    assert len(train.label) == 54 * 8 and len(val.label) == 18 * 8  # one pick label per probed cell
+    dark = train.obs[train.state, 0].flatten(1)[th.arange(len(train.cell)), train.cell] == 0
+    assert th.equal(train.label.bool(), dark)  # invalid exactly where the pick was labelled invalid
+    assert 0 < float(val.label.mean()) < 1
+    assert int(train.state.max()) == 53 and int(val.state.max()) == 17
+    first = fr.load_splits(tmp_path / "data", 0.25, max_shards="s00:1")
+    assert len(first[0].obs) + len(first[1].obs) == 36  # one shard of six scenes
+    report = fr.train_fall_risk(tmp_path / "data", tmp_path / "bal.pt", init=None, epochs=30, batch=8, lr=3e-3,
+                                val_fraction=0.25)
+    assert report["val_states"] == 18 and report["train_states"] == 54 and report["val_fraction"] == 0.25
+    assert report["val_auc"] > 0.85 and report["val_recall_invalid"] > 0.7 and report["val_recall_valid"] > 0.7
+    strict = fr.rethreshold(tmp_path / "bal.pt", tmp_path / "data", 1.0, tmp_path / "r100.pt")
+    copy = fr.FallRiskModel.load(tmp_path / "r100.pt")
+    assert copy.threshold == strict["threshold"] and strict["val_recall_invalid"] == 1.0
+    assert copy.info["rethresholded_from"] == str(tmp_path / "bal.pt") and copy.info["val_auc"] == report["val_auc"]
+    scores = fr.scores(copy, val)
+    lowest_fall = scores[val.label.numpy() == 1].min()
+    assert copy.threshold <= lowest_fall < copy.threshold + 0.01  # every held-out fall flagged, no higher threshold
+    assert strict["threshold"] == fr.recall_threshold(val.label.numpy(), scores, 1.0)
+    env = gym.make("ShelfSort-v0", pixel_size=0.02)  # 20 x 30 cells, the synthetic layout
+    PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0), ("push", 0), ("push", 180)],
+                                                        widths=(4, 8, 8)), seed=0).save(tmp_path / "p.zip")
+    env.close()
+    check = fr.greedy_check(tmp_path / "data", copy, str(tmp_path / "p.zip"))
+    assert check["val_states"] == 18 and check["probes_invalid"] == pytest.approx(float(val.label.mean()))
+    all_invalid = [bool(val.label[val.state == t].all()) for t in range(18)]
+    # every fall flagged: the filtered choice is invalid only where no labelled pick is kept
+    assert np.mean(all_invalid) <= check["filtered_invalid"] < check["greedy_invalid"]
+    with pytest.raises(ValueError, match="asks for 3 shards of series s00"):
+        fr.load_splits(tmp_path / "data", 0.25, max_shards="s00:3")
+
+
+def test_the_recall_threshold():
+    labels = np.array([0, 0, 0, 1, 1, 1, 1])
+    p = np.array([0.1, 0.5, 0.7, 0.3, 0.6, 0.8, 0.9])
+    assert fr.recall_threshold(labels, p, 1.0) == 0.3  # the lowest fall's score
+    assert fr.recall_threshold(labels, p, 0.75) == 0.6
+    assert fr.recall_threshold(labels, p, 0.5) == 0.8
+    assert fr.threshold_report(labels, p, 0.6) == {"threshold": 0.6, "val_recall_invalid": 0.75,
+                                                   "val_recall_valid": pytest.approx(2 / 3)}
+    for bad in (0.0, 1.5):
+        with pytest.raises(ValueError, match="recall must be in"):
+            fr.recall_threshold(labels, p, bad)
+    with pytest.raises(ValueError, match="no fall among"):
+        fr.recall_threshold(np.zeros(3), p[:3], 0.9)
 
 
 def test_the_auc_and_the_threshold():
@@ -251,3 +341,13 @@ def test_the_command_line_names_bad_input_in_one_line_and_writes_nothing(tmp_pat
     assert "neither one of" in capsys.readouterr().err and not (tmp_path / "d").exists()
     assert fr.main(["check", "--data", str(tmp_path), "--model", str(tmp_path / "m.pt"), "--checkpoint", "p.zip"]) == 2
     assert "does not exist" in capsys.readouterr().err
+    assert fr.main(["threshold", "--data", str(tmp_path), "--model", str(tmp_path / "m.pt"), "--recall", "0.9",
+                    "--out", str(tmp_path / "r.pt")]) == 2
+    assert "does not exist" in capsys.readouterr().err and not (tmp_path / "r.pt").exists()
+    synthetic_episodes(tmp_path / "episodes", episodes=2)
+    assert fr.main(["train", "--data", str(tmp_path / "episodes"), "--out", str(tmp_path / "m.pt"),
+                    "--max-shards", "s00:1"]) == 2
+    assert "selects a teacher dataset's shards" in capsys.readouterr().err and not (tmp_path / "m.pt").exists()
+    assert fr.main(["train", "--data", str(tmp_path / "episodes"), "--out", str(tmp_path / "m.pt"),
+                    "--recall", "1.5"]) == 2
+    assert "recall must be in (0, 1]" in capsys.readouterr().err and not (tmp_path / "m.pt").exists()
