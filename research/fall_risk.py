@@ -303,11 +303,13 @@ def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
                  th.as_tensor(np.concatenate(cell)), th.as_tensor(np.concatenate(label), dtype=th.float32))
 
 
-def load_splits(data: pathlib.Path, val_fraction: float, max_shards: str | None = None) -> tuple[Split, Split]:
+def load_splits(data: pathlib.Path, val_fraction: float, max_shards: str | None = None,
+                max_states: int | None = None) -> tuple[Split, Split]:
     """The training and held-out splits of ``data``: a teacher dataset (``sNN_NNNNN.npz`` shards,
-    `shelf_env.privileged.dataset`; split by scene as the distillation splits it, ``max_shards`` as its
-    ``--max-shards``) or a folder of collected episodes (`collect`; the last ``val_fraction`` of the
-    episodes by file name held out)."""
+    `shelf_env.privileged.dataset`; split by scene as the distillation splits it, ``max_shards`` and
+    ``max_states`` as its ``--max-shards`` and ``--max-states``: the first that many training states only,
+    the held-out scenes unchanged) or a folder of collected episodes (`collect`; the last ``val_fraction``
+    of the episodes by file name held out)."""
     from shelf_env.privileged import dataset
 
     if not 0 < val_fraction < 1:
@@ -317,11 +319,16 @@ def load_splits(data: pathlib.Path, val_fraction: float, max_shards: str | None 
 
         shards = select_shards(dataset.load_dataset(data), max_shards)
         train, val = split_by_scene(shards, val_fraction)
+        if max_states is not None:
+            if max_states < 1:
+                raise ValueError(f"max_states must be >= 1, got {max_states}")
+            train = train[:max_states]
         if not val:
             raise ValueError(f"{data}: {len(shards)} shards leave no held-out scene at val_fraction {val_fraction}")
         return teacher_split(shards, np.array(train)), teacher_split(shards, np.array(val))
-    if max_shards is not None:
-        raise ValueError(f"max_shards selects a teacher dataset's shards; {data} holds none (sNN_NNNNN.npz)")
+    if max_shards is not None or max_states is not None:
+        raise ValueError(f"max_shards and max_states select a teacher dataset's shards and states; {data} holds "
+                         "none (sNN_NNNNN.npz)")
     episodes = load_dataset(data)
     n_val = max(1, int(round(len(episodes) * val_fraction)))
     if len(episodes) - n_val < 1:
@@ -401,7 +408,8 @@ def threshold_report(labels: np.ndarray, p: np.ndarray, threshold: float) -> dic
 
 def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = None, epochs: int = 8,
                     batch: int = 32, lr: float = 3e-4, val_fraction: float = 0.15, seed: int = 0,
-                    max_shards: str | None = None, recall: float | None = None) -> dict[str, Any]:
+                    max_shards: str | None = None, recall: float | None = None,
+                    max_states: int | None = None) -> dict[str, Any]:
     """Fit a `FallRiskModel` on ``data`` (see the module docstring; `load_splits`: collected episodes,
     or a teacher dataset's pick labels) and save it to ``out``. The held-out split (the last
     ``val_fraction`` of the episodes, or of each series' scenes) chooses the epoch whose weights rank
@@ -415,7 +423,7 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
     if recall is not None and not 0 < recall <= 1:
         raise ValueError(f"recall must be in (0, 1], got {recall}")
     th.manual_seed(seed)
-    train, val = load_splits(data, val_fraction, max_shards)
+    train, val = load_splits(data, val_fraction, max_shards, max_states)
     model = FallRiskModel(int(train.obs.shape[1]))
     if init is not None:
         from sb3_pixeldqn import PixelDoubleDQN
@@ -461,6 +469,7 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
     p, labels = scores(model, val), val.label.numpy()
     model.threshold = pick_threshold(labels, p) if recall is None else recall_threshold(labels, p, recall)
     report = {"obs_shape": list(train.obs.shape[1:]), "data": str(data), "max_shards": max_shards,
+              "max_states": max_states,
               "val_fraction": val_fraction, "recall_target": recall,
               "train_states": len(train.obs), "train_probes": len(train.label), "train_invalid": int(train.label.sum()),
               "val_states": len(val.obs), "val_probes": len(labels), "val_invalid": int(labels.sum()),
@@ -614,6 +623,8 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--val-fraction", type=float, default=0.15,
                    help="held-out share: of the episodes, or of each series' scenes of a teacher dataset")
     t.add_argument("--max-shards", default=None, help="a teacher dataset's shards to use (the distillation's option)")
+    t.add_argument("--max-states", type=int, default=None,
+                   help="a teacher dataset's first that many training states only (its held-out scenes unchanged)")
     t.add_argument("--recall", type=float, default=None,
                    help="threshold: the highest that flags this share of the held-out falls (default: the best "
                         "balanced accuracy)")
@@ -644,7 +655,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             init = None if args.init == "none" else args.init
             report = train_fall_risk(args.data, args.out, init, args.epochs, args.batch, val_fraction=args.val_fraction,
-                                     max_shards=args.max_shards, recall=args.recall)
+                                     max_shards=args.max_shards, recall=args.recall, max_states=args.max_states)
             print(json.dumps({k: v for k, v in report.items() if k != "history"}, indent=1))
     except ValueError as err:
         print(f"python -m research.fall_risk {args.command}: {err}", file=sys.stderr)

@@ -149,6 +149,9 @@ def test_training_on_a_teacher_dataset_reads_its_pick_labels_split_by_scene(tmp_
     assert int(train.state.max()) == 53 and int(val.state.max()) == 17
     first = fr.load_splits(tmp_path / "data", 0.25, max_shards="s00:1")
     assert len(first[0].obs) + len(first[1].obs) == 36  # one shard of six scenes
+    fewer = fr.load_splits(tmp_path / "data", 0.25, max_states=10)
+    assert th.equal(fewer[0].obs, train.obs[:10]) and th.equal(fewer[1].obs, val.obs)  # the same held-out scenes
+    assert th.equal(fewer[0].label, train.label[train.state < 10])
     report = fr.train_fall_risk(tmp_path / "data", tmp_path / "bal.pt", init=None, epochs=30, batch=8, lr=3e-3,
                                 val_fraction=0.25)
     assert report["val_states"] == 18 and report["train_states"] == 54 and report["val_fraction"] == 0.25
@@ -347,7 +350,7 @@ def test_the_command_line_names_bad_input_in_one_line_and_writes_nothing(tmp_pat
     synthetic_episodes(tmp_path / "episodes", episodes=2)
     assert fr.main(["train", "--data", str(tmp_path / "episodes"), "--out", str(tmp_path / "m.pt"),
                     "--max-shards", "s00:1"]) == 2
-    assert "selects a teacher dataset's shards" in capsys.readouterr().err and not (tmp_path / "m.pt").exists()
+    assert "select a teacher dataset's shards" in capsys.readouterr().err and not (tmp_path / "m.pt").exists()
     assert fr.main(["train", "--data", str(tmp_path / "episodes"), "--out", str(tmp_path / "m.pt"),
                     "--recall", "1.5"]) == 2
     assert "recall must be in (0, 1]" in capsys.readouterr().err and not (tmp_path / "m.pt").exists()

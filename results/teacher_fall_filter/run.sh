@@ -43,3 +43,14 @@ python -m research.evaluate --policies "$dir/p_s_ffbal.zip+fall-filter" "$dir/p_
     --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/distill_scaling/val90
 python -m shelf_env.evaluation.compare "$out/val90" --pair p_s_ffbal+fall-filter "$ref" \
     --pair p_s_ffr90+fall-filter "$ref" --pair p_s_ffr90+fall-filter p_s_ffbal+fall-filter --out "$out/val90_pairs.md"
+# 4. the fall model's scaling curve: the same recipe on the first 1,675 / 3,349 / 6,698 training states (the held-out
+#    scenes unchanged), each checked at its balanced threshold -> curve/ff_<states>.fall_risk.pt, curve/check_<states>.json
+#    (the full model is step 1's)
+mkdir -p "$out/curve"
+for k in 1675 3349 6698; do
+    [ -f "$out/curve/ff_$k.fall_risk.pt" ] || python -m research.fall_risk train --data data/teacher \
+        --max-shards "$shards" --max-states "$k" --val-fraction 0.2 --init "$shipped" --epochs 8 \
+        --out "$out/curve/ff_$k.fall_risk.pt" | tee "$out/curve/train_$k.log"
+    [ -f "$out/curve/check_$k.json" ] || python -m research.fall_risk check --data data/teacher \
+        --model "$out/curve/ff_$k.fall_risk.pt" --checkpoint "$shipped" --out "$out/curve/check_$k.json"
+done
