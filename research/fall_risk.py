@@ -213,19 +213,46 @@ def load_dataset(folder: pathlib.Path) -> list[dict[str, np.ndarray]]:
     return episodes
 
 
+def coordinate_grid(rows: int, cols: int) -> th.Tensor:
+    """``(2, rows, cols)``: each cell's depth (row / (rows - 1), 0 at row 0) and its distance from the centre
+    line (|column - (cols - 1) / 2| / (cols / 2)), the same for a cell and its mirror image."""
+    depth = th.linspace(0.0, 1.0, rows).view(rows, 1).expand(rows, cols)
+    centre = (th.arange(cols, dtype=th.float32) - (cols - 1) / 2).abs() / (cols / 2)
+    return th.stack([depth, centre.view(1, cols).expand(rows, cols)])
+
+
 class FallRiskModel(th.nn.Module):
-    """Observation ``(B, C, H, W)`` uint8 -> logit of "a pick here ends the episode invalid", ``(B, H, W)``."""
+    """Observation ``(B, C, H, W)`` uint8 -> logit of "a pick here ends the episode invalid", ``(B, H, W)``.
+
+    ``coords``: two more input channels, each cell's depth (its row over the rows) and its distance from
+    the cabinet's centre line (|column - centre| over half the columns). A fully convolutional net sees
+    a scene's layout only through its receptive field; whether a carry drags an object out depends on
+    where in the cabinet the pick is. The distance is symmetric, so the mirror stays an exact symmetry."""
 
     def __init__(self, in_channels: int, widths: tuple[int, int, int] = DEFAULT_WIDTHS,
-                 threshold: float = 0.5) -> None:
+                 threshold: float = 0.5, coords: bool = False) -> None:
         super().__init__()
-        self.fcn = ResidualFCN(in_channels, widths)
+        self.coords = bool(coords)
+        self.fcn = ResidualFCN(in_channels + 2 * self.coords, widths)
         self.in_channels, self.widths = in_channels, tuple(int(w) for w in widths)
         self.threshold = float(threshold)
         self.info: dict[str, Any] = {}  # what training reported (`train_fall_risk`), set by `load`
 
     def forward(self, obs: th.Tensor) -> th.Tensor:
-        return self.fcn(obs.float() / 255.0)
+        x = obs.float() / 255.0
+        if self.coords:
+            rows, cols = x.shape[-2:]
+            x = th.cat([x, coordinate_grid(rows, cols).expand(len(x), 2, rows, cols)], dim=1)
+        return self.fcn(x)
+
+    def start_from(self, fcn: th.nn.Module) -> None:
+        """Copy a pick FCN's weights (a P+S / S model's, same widths); with ``coords`` the coordinate channels'
+        input weights start at zero, so the copy computes the same map until training moves them."""
+        state = fcn.state_dict()
+        if self.coords:
+            stem = state["stem.weight"]
+            state["stem.weight"] = th.cat([stem, th.zeros(stem.shape[0], 2, *stem.shape[2:])], dim=1)
+        self.fcn.load_state_dict(state)
 
     def risk(self, obs: np.ndarray) -> np.ndarray:
         """Predicted probability per cell, ``(H, W)`` for one observation or ``(B, H, W)`` for a batch."""
@@ -238,7 +265,7 @@ class FallRiskModel(th.nn.Module):
     def save(self, path: str | pathlib.Path, info: dict[str, Any] | None = None) -> None:
         """Weights and settings in one torch file, written atomically."""
         payload = {"state_dict": self.state_dict(), "in_channels": self.in_channels, "widths": self.widths,
-                   "threshold": self.threshold, "info": info or {}}
+                   "threshold": self.threshold, "coords": self.coords, "info": info or {}}
         write_atomically(path, lambda tmp: th.save(payload, tmp))
 
     @classmethod
@@ -249,7 +276,8 @@ class FallRiskModel(th.nn.Module):
                              "(python -m research.fall_risk train makes one)")
         try:
             payload = th.load(path, map_location="cpu", weights_only=True)
-            model = cls(int(payload["in_channels"]), tuple(payload["widths"]), float(payload["threshold"]))
+            model = cls(int(payload["in_channels"]), tuple(payload["widths"]), float(payload["threshold"]),
+                        bool(payload.get("coords", False)))
             model.load_state_dict(payload["state_dict"])
         except Exception as err:  # noqa: BLE001  (any failure to read is a bad file)
             raise ValueError(f"{path} is not a readable fall-risk model: {err}") from err
@@ -409,14 +437,14 @@ def threshold_report(labels: np.ndarray, p: np.ndarray, threshold: float) -> dic
 def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = None, epochs: int = 8,
                     batch: int = 32, lr: float = 3e-4, val_fraction: float = 0.15, seed: int = 0,
                     max_shards: str | None = None, recall: float | None = None,
-                    max_states: int | None = None) -> dict[str, Any]:
+                    max_states: int | None = None, coords: bool = False) -> dict[str, Any]:
     """Fit a `FallRiskModel` on ``data`` (see the module docstring; `load_splits`: collected episodes,
     or a teacher dataset's pick labels) and save it to ``out``. The held-out split (the last
     ``val_fraction`` of the episodes, or of each series' scenes) chooses the epoch whose weights rank
     its labels best (AUC) and the threshold: the best balanced accuracy, or with ``recall`` the highest
     that flags that share of the held-out falls (`recall_threshold`). The returned report (also the
     file's ``info``) gives their AUC and the recall of falls and of safe picks at the threshold.
-    ``init``: a P+S / S zip whose pick FCN starts the model."""
+    ``init``: a P+S / S zip whose pick FCN starts the model. ``coords``: `FallRiskModel`'s coordinate channels."""
     if epochs < 1 or batch < 1 or not 0 < val_fraction < 1:
         raise ValueError(f"need epochs >= 1, batch >= 1 and 0 < val_fraction < 1; got {epochs}, {batch}, "
                          f"{val_fraction}")
@@ -424,12 +452,11 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
         raise ValueError(f"recall must be in (0, 1], got {recall}")
     th.manual_seed(seed)
     train, val = load_splits(data, val_fraction, max_shards, max_states)
-    model = FallRiskModel(int(train.obs.shape[1]))
+    model = FallRiskModel(int(train.obs.shape[1]), coords=coords)
     if init is not None:
         from sb3_pixeldqn import PixelDoubleDQN
 
-        source = PixelDoubleDQN.load(init, device="cpu").policy.q_net.fcns["pick"]
-        model.fcn.load_state_dict(source.state_dict())
+        model.start_from(PixelDoubleDQN.load(init, device="cpu").policy.q_net.fcns["pick"])
     positives = float(train.label.mean())
     pos_weight = th.tensor((1 - positives) / max(positives, 1e-6))
     optimizer = th.optim.Adam(model.parameters(), lr=lr, weight_decay=2e-5)
@@ -475,7 +502,7 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
               "val_states": len(val.obs), "val_probes": len(labels), "val_invalid": int(labels.sum()),
               "val_auc": auc(labels, p), **threshold_report(labels, p, model.threshold),
               "epochs": epochs, "best_epoch": best[1],
-              "init": init, "history": history}
+              "init": init, "coords": coords, "history": history}
     model.save(out, report)
     return report
 
@@ -625,6 +652,7 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--max-shards", default=None, help="a teacher dataset's shards to use (the distillation's option)")
     t.add_argument("--max-states", type=int, default=None,
                    help="a teacher dataset's first that many training states only (its held-out scenes unchanged)")
+    t.add_argument("--coords", action="store_true", help="add the depth and centre-distance channels")
     t.add_argument("--recall", type=float, default=None,
                    help="threshold: the highest that flags this share of the held-out falls (default: the best "
                         "balanced accuracy)")
@@ -655,7 +683,8 @@ def main(argv: list[str] | None = None) -> int:
         else:
             init = None if args.init == "none" else args.init
             report = train_fall_risk(args.data, args.out, init, args.epochs, args.batch, val_fraction=args.val_fraction,
-                                     max_shards=args.max_shards, recall=args.recall, max_states=args.max_states)
+                                     max_shards=args.max_shards, recall=args.recall, max_states=args.max_states,
+                                     coords=args.coords)
             print(json.dumps({k: v for k, v in report.items() if k != "history"}, indent=1))
     except ValueError as err:
         print(f"python -m research.fall_risk {args.command}: {err}", file=sys.stderr)

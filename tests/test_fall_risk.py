@@ -354,3 +354,32 @@ def test_the_command_line_names_bad_input_in_one_line_and_writes_nothing(tmp_pat
     assert fr.main(["train", "--data", str(tmp_path / "episodes"), "--out", str(tmp_path / "m.pt"),
                     "--recall", "1.5"]) == 2
     assert "recall must be in (0, 1]" in capsys.readouterr().err and not (tmp_path / "m.pt").exists()
+
+
+def test_coordinate_channels_start_as_the_pick_fcn_keep_the_mirror_and_survive_a_save(tmp_path):
+    """With ``coords`` the model starts computing exactly the pick FCN's map (the new channels' weights are
+    zero), its coordinate channels are the same for a cell and its mirror image (so the mirror augmentation
+    stays exact), and a saved model loads with them."""
+    env = gym.make("ShelfSort-v0", pixel_size=0.02)
+    model = PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0), ("push", 0), ("push", 180)],
+                                                                widths=(4, 8, 8)), seed=0)
+    obs, _ = env.reset(seed=3)
+    env.close()
+    fcn = model.policy.q_net.fcns["pick"]
+    risk = fr.FallRiskModel(4, widths=(4, 8, 8), coords=True)
+    risk.start_from(fcn)
+    x = th.as_tensor(obs[None])
+    with th.no_grad():
+        assert th.allclose(risk(x), fcn(x.float() / 255.0), atol=1e-6)
+        th.nn.init.normal_(risk.fcn.stem.weight)  # the coordinates now count
+        assert not th.allclose(risk(x), fcn(x.float() / 255.0), atol=1e-3)
+    grid = fr.coordinate_grid(20, 30)
+    assert th.equal(grid, th.flip(grid, dims=(-1,))) and grid.shape == (2, 20, 30)
+    assert grid[0, 0, 0] == 0 and grid[0, 19, 0] == 1 and grid[1, 0, 0] == grid[1, 0, 29] == pytest.approx(29 / 30)
+    assert grid[1, 0, 14] == grid[1, 0, 15] == pytest.approx(1 / 30)
+    risk.save(tmp_path / "c.pt")
+    back = fr.FallRiskModel.load(tmp_path / "c.pt")
+    assert back.coords and np.allclose(back.risk(obs), risk.risk(obs), atol=1e-6)
+    plain = fr.FallRiskModel(4, widths=(4, 8, 8))
+    plain.save(tmp_path / "p.pt")
+    assert not fr.FallRiskModel.load(tmp_path / "p.pt").coords

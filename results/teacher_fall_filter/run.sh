@@ -54,3 +54,10 @@ for k in 1675 3349 6698; do
     [ -f "$out/curve/check_$k.json" ] || python -m research.fall_risk check --data data/teacher \
         --model "$out/curve/ff_$k.fall_risk.pt" --checkpoint "$shipped" --out "$out/curve/check_$k.json"
 done
+# 5. the same recipe with two coordinate channels (--coords: depth, distance from the centre line), all training states
+#    -> curve/ff_coords.fall_risk.pt, curve/check_coords.json
+[ -f "$out/curve/ff_coords.fall_risk.pt" ] || python -m research.fall_risk train --data data/teacher \
+    --max-shards "$shards" --coords --val-fraction 0.2 --init "$shipped" --epochs 8 \
+    --out "$out/curve/ff_coords.fall_risk.pt" | tee "$out/curve/train_coords.log"
+[ -f "$out/curve/check_coords.json" ] || python -m research.fall_risk check --data data/teacher \
+    --model "$out/curve/ff_coords.fall_risk.pt" --checkpoint "$shipped" --out "$out/curve/check_coords.json"
