@@ -292,6 +292,7 @@ class Split:
     state: th.Tensor  # (K,) index into obs
     cell: th.Tensor  # (K,) flat cell index
     label: th.Tensor  # (K,) float 0/1
+    objects: np.ndarray | None = None  # (S,) objects in each state's scene, where the data says (a teacher dataset)
 
 
 def make_split(episodes: list[dict[str, np.ndarray]]) -> Split:
@@ -313,7 +314,7 @@ def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
     `shelf_env.training.distill.split_by_scene`'s): label 1 where the pick ended the episode invalid
     (``label_valid`` false: an object fell or the scene did not come to rest). Pushes are left out:
     the filter masks picks."""
-    obs, state, cell, label, first = [], [], [], [], 0
+    obs, state, cell, label, objects, first = [], [], [], [], [], 0
     local = np.full(sum(s.num_states for s in shards), -1, np.int64)
     local[states] = np.arange(len(states))
     for shard in shards:
@@ -323,12 +324,15 @@ def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
         mine = local[first:first + shard.num_states]
         keep = (mine[a["label_state"]] >= 0) & (a["label_action"] // cells == pick)
         obs.append(a["obs"][mine >= 0])
+        scene_objects = np.array([int(e["num_objects"]) for e in shard.meta["episodes"]])
+        objects.append(scene_objects[a["state_episode"][mine >= 0]])
         state.append(mine[a["label_state"][keep]])
         cell.append(a["label_action"][keep] % cells)
         label.append(~a["label_valid"][keep].astype(bool))
         first += shard.num_states
     return Split(th.as_tensor(np.concatenate(obs)), th.as_tensor(np.concatenate(state)),
-                 th.as_tensor(np.concatenate(cell)), th.as_tensor(np.concatenate(label), dtype=th.float32))
+                 th.as_tensor(np.concatenate(cell)), th.as_tensor(np.concatenate(label), dtype=th.float32),
+                 np.concatenate(objects))
 
 
 def load_splits(data: pathlib.Path, val_fraction: float, max_shards: str | None = None,
@@ -513,7 +517,8 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
     ``val_fraction`` and ``max_shards`` the fall-risk model was trained with, so the same split): at
     each state, the pick the model values most among the labelled cells, and the one it values most
     among those the filter keeps (itself where none is kept), with the share of each that ended the
-    episode invalid in the forked copy, beside the share of all labelled picks."""
+    episode invalid in the forked copy, beside the share of all labelled picks; and how well the
+    fall-risk model ranks those labels (AUC), overall and, on a teacher dataset, per number of objects."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     info = getattr(risk, "info", {})
@@ -523,17 +528,27 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
     pick = [name for name, _ in model.policy.maps].index("pick")
     labels, cells, states = val.label.numpy(), val.cell.numpy(), val.state.numpy()
     greedy, filtered = [], []
+    scored = np.zeros(len(labels))  # the fall-risk model's probability at each label
     for t in np.unique(states):
         mine = states == t
         obs = val.obs[int(t)].numpy()
         q = model.policy.q_map_values(obs)[pick].reshape(-1)[cells[mine]]
-        kept = risk.risk(obs).reshape(-1)[cells[mine]] < risk.threshold
+        scored[mine] = risk.risk(obs).reshape(-1)[cells[mine]]
+        kept = scored[mine] < risk.threshold
         outcome = labels[mine]
         greedy.append(outcome[int(np.argmax(q))])
         filtered.append(outcome[int(np.argmax(np.where(kept, q, -np.inf)))] if kept.any() else greedy[-1])
-    return {"checkpoint": checkpoint, "threshold": risk.threshold, "val_states": len(greedy),
-            "probes_invalid": float(labels.mean()), "greedy_invalid": float(np.mean(greedy)),
-            "filtered_invalid": float(np.mean(filtered))}
+    out = {"checkpoint": checkpoint, "threshold": risk.threshold, "val_states": len(greedy),
+           "probes_invalid": float(labels.mean()), "greedy_invalid": float(np.mean(greedy)),
+           "filtered_invalid": float(np.mean(filtered))}
+    out["auc"] = auc(labels, scored)
+    if val.objects is not None:
+        n_of_label = val.objects[states]
+        out["by_objects"] = {int(n): {"labels": int((n_of_label == n).sum()),
+                                      "invalid": float(labels[n_of_label == n].mean()),
+                                      "auc": auc(labels[n_of_label == n], scored[n_of_label == n])}
+                             for n in np.unique(n_of_label)}
+    return out
 
 
 def rethreshold(model_path: pathlib.Path, data: pathlib.Path, recall: float, out: pathlib.Path) -> dict[str, Any]:

@@ -131,7 +131,7 @@ def synthetic_teacher_shards(folder, shards=2, episodes=6, states=6, seed=0):
                     ep.states[key].append(v)
             eps.append(ep)
         meta = {"format": dataset.FORMAT, "dynamics_version": dataset.DYNAMICS_VERSION, "layout": layout,
-                "series": 0, "shard": k, "episodes": [{}] * episodes}
+                "series": 0, "shard": k, "episodes": [{"num_objects": 3 + e % 2} for e in range(episodes)]}
         dataset.save_shard(folder / f"s00_{k:05d}.npz", meta, eps, layout["obs_shape"])
 
 
@@ -170,6 +170,9 @@ def test_training_on_a_teacher_dataset_reads_its_pick_labels_split_by_scene(tmp_
     env.close()
     check = fr.greedy_check(tmp_path / "data", copy, str(tmp_path / "p.zip"))
     assert check["val_states"] == 18 and check["probes_invalid"] == pytest.approx(float(val.label.mean()))
+    assert check["auc"] == pytest.approx(fr.auc(val.label.numpy(), scores))  # the model's ranking of those labels
+    by = check["by_objects"]  # held out: scenes 3, 4, 5 of the second shard, with 4, 3 and 4 objects
+    assert sorted(by) == [3, 4] and by[3]["labels"] == 6 * 8 and by[4]["labels"] == 12 * 8
     all_invalid = [bool(val.label[val.state == t].all()) for t in range(18)]
     # every fall flagged: the filtered choice is invalid only where no labelled pick is kept
     assert np.mean(all_invalid) <= check["filtered_invalid"] < check["greedy_invalid"]
@@ -334,6 +337,7 @@ def test_greedy_check_reads_the_models_choice_with_and_without_the_filter(tmp_pa
     all_invalid = [bool(val[0]["probes"][val[0]["probes"][:, 0] == t, 3].all()) for t in range(len(val[0]["obs"]))]
     assert oracle["filtered_invalid"] == pytest.approx(np.mean(all_invalid))
     assert oracle["greedy_invalid"] == none["greedy_invalid"]
+    assert oracle["auc"] == 1.0 and "by_objects" not in oracle  # collected episodes do not say their N here
 
 
 def test_the_command_line_names_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
