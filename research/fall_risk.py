@@ -293,6 +293,7 @@ class Split:
     cell: th.Tensor  # (K,) flat cell index
     label: th.Tensor  # (K,) float 0/1
     objects: np.ndarray | None = None  # (S,) objects in each state's scene, where the data says (a teacher dataset)
+    sorted_change: np.ndarray | None = None  # (K,) change in sorted objects the labelled pick made (a teacher dataset)
 
 
 def make_split(episodes: list[dict[str, np.ndarray]]) -> Split:
@@ -314,7 +315,7 @@ def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
     `shelf_env.training.distill.split_by_scene`'s): label 1 where the pick ended the episode invalid
     (``label_valid`` false: an object fell or the scene did not come to rest). Pushes are left out:
     the filter masks picks."""
-    obs, state, cell, label, objects, first = [], [], [], [], [], 0
+    obs, state, cell, label, objects, dsorted, first = [], [], [], [], [], [], 0
     local = np.full(sum(s.num_states for s in shards), -1, np.int64)
     local[states] = np.arange(len(states))
     for shard in shards:
@@ -329,10 +330,11 @@ def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
         state.append(mine[a["label_state"][keep]])
         cell.append(a["label_action"][keep] % cells)
         label.append(~a["label_valid"][keep].astype(bool))
+        dsorted.append(a["label_dsorted"][keep].astype(np.int64))
         first += shard.num_states
     return Split(th.as_tensor(np.concatenate(obs)), th.as_tensor(np.concatenate(state)),
                  th.as_tensor(np.concatenate(cell)), th.as_tensor(np.concatenate(label), dtype=th.float32),
-                 np.concatenate(objects))
+                 np.concatenate(objects), np.concatenate(dsorted))
 
 
 def load_splits(data: pathlib.Path, val_fraction: float, max_shards: str | None = None,
@@ -511,6 +513,10 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
     return report
 
 
+#: Thresholds `greedy_check` sweeps, beside the model's own.
+SWEEP = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
+
+
 def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
                  val_fraction: float | None = None) -> dict[str, Any]:
     """What the filter does to a model's choice on the held-out split of ``data`` (`load_splits`, with the
@@ -518,7 +524,10 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
     each state, the pick the model values most among the labelled cells, and the one it values most
     among those the filter keeps (itself where none is kept), with the share of each that ended the
     episode invalid in the forked copy, beside the share of all labelled picks; and how well the
-    fall-risk model ranks those labels (AUC), overall and, on a teacher dataset, per number of objects."""
+    fall-risk model ranks those labels (AUC), overall and, on a teacher dataset, per number of objects. On a
+    teacher dataset also the mean change in sorted objects of each choice (``greedy_sorted``,
+    ``filtered_sorted``: a fall counts as its label says), what the filter costs in progress. ``sweep``:
+    the filtered choice's invalid share (and change in sorted objects) at each threshold of `SWEEP`."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     info = getattr(risk, "info", {})
@@ -527,21 +536,33 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
     model = PixelDoubleDQN.load(checkpoint, device="cpu")
     pick = [name for name, _ in model.policy.maps].index("pick")
     labels, cells, states = val.label.numpy(), val.cell.numpy(), val.state.numpy()
-    greedy, filtered = [], []
+    values = np.zeros(len(labels))  # the checkpoint's Q-value at each label
     scored = np.zeros(len(labels))  # the fall-risk model's probability at each label
-    for t in np.unique(states):
-        mine = states == t
-        obs = val.obs[int(t)].numpy()
-        q = model.policy.q_map_values(obs)[pick].reshape(-1)[cells[mine]]
-        scored[mine] = risk.risk(obs).reshape(-1)[cells[mine]]
-        kept = scored[mine] < risk.threshold
-        outcome = labels[mine]
-        greedy.append(outcome[int(np.argmax(q))])
-        filtered.append(outcome[int(np.argmax(np.where(kept, q, -np.inf)))] if kept.any() else greedy[-1])
-    out = {"checkpoint": checkpoint, "threshold": risk.threshold, "val_states": len(greedy),
-           "probes_invalid": float(labels.mean()), "greedy_invalid": float(np.mean(greedy)),
-           "filtered_invalid": float(np.mean(filtered))}
-    out["auc"] = auc(labels, scored)
+    groups = [np.flatnonzero(states == t) for t in np.unique(states)]
+    for index in groups:
+        obs = val.obs[int(states[index[0]])].numpy()
+        values[index] = model.policy.q_map_values(obs)[pick].reshape(-1)[cells[index]]
+        scored[index] = risk.risk(obs).reshape(-1)[cells[index]]
+
+    def choices(threshold: float) -> np.ndarray:
+        """Per state, the label the filtered choice lands on (the unfiltered one where nothing is kept)."""
+        out = np.empty(len(groups), np.int64)
+        for k, index in enumerate(groups):
+            kept = scored[index] < threshold
+            q = np.where(kept, values[index], -np.inf) if kept.any() else values[index]
+            out[k] = index[int(np.argmax(q))]
+        return out
+
+    def outcome(chosen: np.ndarray, name: str) -> dict[str, float]:
+        result = {f"{name}_invalid": float(labels[chosen].mean()) if len(chosen) else float("nan")}
+        if val.sorted_change is not None and len(chosen):
+            result[f"{name}_sorted"] = float(val.sorted_change[chosen].mean())
+        return result
+
+    out: dict[str, Any] = {"checkpoint": checkpoint, "threshold": risk.threshold, "val_states": len(groups),
+                           "probes_invalid": float(labels.mean()), **outcome(choices(np.inf), "greedy"),
+                           **outcome(choices(risk.threshold), "filtered"), "auc": auc(labels, scored)}
+    out["sweep"] = [{"threshold": t, **outcome(choices(t), "filtered")} for t in SWEEP]
     if val.objects is not None:
         n_of_label = val.objects[states]
         out["by_objects"] = {int(n): {"labels": int((n_of_label == n).sum()),

@@ -124,7 +124,7 @@ def synthetic_teacher_shards(folder, shards=2, episodes=6, states=6, seed=0):
                     for m in (0, 1):  # the pick, and a push at the same cell (never valid)
                         valid = not dark if m == 0 else False
                         for key, v in zip(dataset.LABEL_KEYS, (t, m * rows * cols + r * cols + c, valid, not valid,
-                                                               False, 0, 2)):
+                                                               False, int(valid), 2)):  # a valid pick sorts one
                             ep.labels[key].append(v)
                 ep.obs.append(obs)
                 for key, v in zip(dataset.EPISODE_STATE_KEYS, (t, 0, np.nan, 0)):
@@ -173,6 +173,14 @@ def test_training_on_a_teacher_dataset_reads_its_pick_labels_split_by_scene(tmp_
     assert check["auc"] == pytest.approx(fr.auc(val.label.numpy(), scores))  # the model's ranking of those labels
     by = check["by_objects"]  # held out: scenes 3, 4, 5 of the second shard, with 4, 3 and 4 objects
     assert sorted(by) == [3, 4] and by[3]["labels"] == 6 * 8 and by[4]["labels"] == 12 * 8
+    # a synthetic pick sorts one object exactly when it is valid
+    assert check["greedy_sorted"] == pytest.approx(1 - check["greedy_invalid"])
+    assert check["filtered_sorted"] == pytest.approx(1 - check["filtered_invalid"])
+    sweep = {row["threshold"]: row for row in check["sweep"]}
+    assert sorted(sweep) == list(fr.SWEEP)
+    assert all(r["filtered_sorted"] == pytest.approx(1 - r["filtered_invalid"]) for r in sweep.values())
+    flags_every_fall = [t for t in sweep if t <= lowest_fall]  # so the filtered choice never lands on a fall it could
+    assert flags_every_fall and all(sweep[t]["filtered_invalid"] <= check["greedy_invalid"] for t in flags_every_fall)
     all_invalid = [bool(val.label[val.state == t].all()) for t in range(18)]
     # every fall flagged: the filtered choice is invalid only where no labelled pick is kept
     assert np.mean(all_invalid) <= check["filtered_invalid"] < check["greedy_invalid"]
