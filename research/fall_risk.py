@@ -527,7 +527,9 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
     fall-risk model ranks those labels (AUC), overall and, on a teacher dataset, per number of objects. On a
     teacher dataset also the mean change in sorted objects of each choice (``greedy_sorted``,
     ``filtered_sorted``: a fall counts as its label says), what the filter costs in progress. ``sweep``:
-    the filtered choice's invalid share (and change in sorted objects) at each threshold of `SWEEP`."""
+    the filtered choice's invalid share (and change in sorted objects) at each threshold of `SWEEP`;
+    ``oracle_*``: the same under a perfect filter (the labels themselves), what the checkpoint's ranking of
+    the safe picks gives when no fall gets through."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     info = getattr(risk, "info", {})
@@ -544,11 +546,11 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
         values[index] = model.policy.q_map_values(obs)[pick].reshape(-1)[cells[index]]
         scored[index] = risk.risk(obs).reshape(-1)[cells[index]]
 
-    def choices(threshold: float) -> np.ndarray:
+    def choices(threshold: float, risky: np.ndarray = scored) -> np.ndarray:
         """Per state, the label the filtered choice lands on (the unfiltered one where nothing is kept)."""
         out = np.empty(len(groups), np.int64)
         for k, index in enumerate(groups):
-            kept = scored[index] < threshold
+            kept = risky[index] < threshold
             q = np.where(kept, values[index], -np.inf) if kept.any() else values[index]
             out[k] = index[int(np.argmax(q))]
         return out
@@ -563,6 +565,7 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
                            "probes_invalid": float(labels.mean()), **outcome(choices(np.inf), "greedy"),
                            **outcome(choices(risk.threshold), "filtered"), "auc": auc(labels, scored)}
     out["sweep"] = [{"threshold": t, **outcome(choices(t), "filtered")} for t in SWEEP]
+    out.update(outcome(choices(0.5, labels), "oracle"))  # a perfect filter: the labels themselves
     if val.objects is not None:
         n_of_label = val.objects[states]
         out["by_objects"] = {int(n): {"labels": int((n_of_label == n).sum()),

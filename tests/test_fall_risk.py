@@ -182,6 +182,8 @@ def test_training_on_a_teacher_dataset_reads_its_pick_labels_split_by_scene(tmp_
     flags_every_fall = [t for t in sweep if t <= lowest_fall]  # so the filtered choice never lands on a fall it could
     assert flags_every_fall and all(sweep[t]["filtered_invalid"] <= check["greedy_invalid"] for t in flags_every_fall)
     all_invalid = [bool(val.label[val.state == t].all()) for t in range(18)]
+    assert check["oracle_invalid"] == pytest.approx(np.mean(all_invalid))  # invalid only where every pick is
+    assert check["oracle_sorted"] == pytest.approx(1 - check["oracle_invalid"])
     # every fall flagged: the filtered choice is invalid only where no labelled pick is kept
     assert np.mean(all_invalid) <= check["filtered_invalid"] < check["greedy_invalid"]
     with pytest.raises(ValueError, match="asks for 3 shards of series s00"):
