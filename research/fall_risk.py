@@ -529,7 +529,8 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
     ``filtered_sorted``: a fall counts as its label says), what the filter costs in progress. ``sweep``:
     the filtered choice's invalid share (and change in sorted objects) at each threshold of `SWEEP`;
     ``oracle_*``: the same under a perfect filter (the labels themselves), what the checkpoint's ranking of
-    the safe picks gives when no fall gets through."""
+    the safe picks gives when no fall gets through; ``q_auc``: how well the checkpoint's own Q-values rank the
+    same labels (low value as risk)."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     info = getattr(risk, "info", {})
@@ -563,7 +564,8 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
 
     out: dict[str, Any] = {"checkpoint": checkpoint, "threshold": risk.threshold, "val_states": len(groups),
                            "probes_invalid": float(labels.mean()), **outcome(choices(np.inf), "greedy"),
-                           **outcome(choices(risk.threshold), "filtered"), "auc": auc(labels, scored)}
+                           **outcome(choices(risk.threshold), "filtered"), "auc": auc(labels, scored),
+                           "q_auc": auc(labels, -values)}
     out["sweep"] = [{"threshold": t, **outcome(choices(t), "filtered")} for t in SWEEP]
     out.update(outcome(choices(0.5, labels), "oracle"))  # a perfect filter: the labels themselves
     if val.objects is not None:

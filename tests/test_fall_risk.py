@@ -171,6 +171,10 @@ def test_training_on_a_teacher_dataset_reads_its_pick_labels_split_by_scene(tmp_
     check = fr.greedy_check(tmp_path / "data", copy, str(tmp_path / "p.zip"))
     assert check["val_states"] == 18 and check["probes_invalid"] == pytest.approx(float(val.label.mean()))
     assert check["auc"] == pytest.approx(fr.auc(val.label.numpy(), scores))  # the model's ranking of those labels
+    policy = PixelDoubleDQN.load(tmp_path / "p.zip").policy
+    q = np.array([policy.q_map_values(val.obs[int(t)].numpy())[0].reshape(-1)[int(c)]
+                  for t, c in zip(val.state, val.cell)])
+    assert check["q_auc"] == pytest.approx(fr.auc(val.label.numpy(), -q))  # the checkpoint's own ranking
     by = check["by_objects"]  # held out: scenes 3, 4, 5 of the second shard, with 4, 3 and 4 objects
     assert sorted(by) == [3, 4] and by[3]["labels"] == 6 * 8 and by[4]["labels"] == 12 * 8
     # a synthetic pick sorts one object exactly when it is valid
