@@ -8,7 +8,8 @@
 #      held-out falls -> model/p_s_ffr90.fall_risk.pt. Each beside a copy of examples/pretrained/p_s.zip
 #      (p_s_ffbal.zip, p_s_ffr90.zip; not committed), so `<zip>+fall-filter` plays the shipped P+S under it.
 #   2. check: each filter's effect on the shipped model's choice among the labelled picks of the held-out
-#      scenes -> greedy_check_bal.json, greedy_check_r90.json
+#      scenes (invalid share and change in sorted objects, at its threshold, over a sweep of thresholds and
+#      under a perfect filter; the AUC overall and per N) -> greedy_check_bal.json, greedy_check_r90.json
 #   3. validation scenes (evaluation seeds 2000-2002, 30 YCB scenes each at N = 5, 8, 11, open loop): both
 #      filtered policies, beside the shipped model's cells copied from results/distill_scaling/val90 (the
 #      same file: p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4) -> val90/, val90_pairs.md
