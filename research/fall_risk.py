@@ -309,7 +309,6 @@ def make_split(episodes: list[dict[str, np.ndarray]]) -> Split:
     return Split(th.cat(obs), th.cat(state), th.cat(cell), th.cat(label))
 
 
-
 def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
     """The pick labels of the teacher dataset's states ``states`` (indices over ``shards`` in order,
     `shelf_env.training.distill.split_by_scene`'s): label 1 where the pick ended the episode invalid
