@@ -28,7 +28,7 @@ cp -p "$shipped" "$dir/p_s_ffbal.zip"
 cp -p "$shipped" "$dir/p_s_ffr90.zip"
 if [ ! -f "$dir/p_s_ffbal.fall_risk.pt" ]; then
     python -m research.fall_risk train --data data/teacher --max-shards "$shards" --val-fraction 0.2 \
-        --init "$shipped" --epochs 8 --out "$dir/p_s_ffbal.fall_risk.pt"
+        --init "$shipped" --epochs 8 --out "$dir/p_s_ffbal.fall_risk.pt" | tee "$out/train.log"
 fi
 if [ ! -f "$dir/p_s_ffr90.fall_risk.pt" ]; then
     python -m research.fall_risk threshold --data data/teacher --model "$dir/p_s_ffbal.fall_risk.pt" --recall 0.9 \
