@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import gymnasium as gym
@@ -22,9 +21,8 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import shelf_env  # noqa: E402, F401  (registers ShelfSort-v0)
-from benchmarks.timing import seconds_per_call  # noqa: E402
+from benchmarks.timing import first_states, seconds_per_action, seconds_per_call  # noqa: E402
 from sb3_pixeldqn import PixelDoubleDQN, QEnsemble  # noqa: E402
-from shelf_env.evaluation.protocol import scene_seed  # noqa: E402
 from shelf_env.policies import checkpoint_pixel_size  # noqa: E402
 
 SHIPPED = ["examples/pretrained/p_s.zip", "examples/pretrained/v2/p_s.zip", "examples/pretrained/v1/p_s.zip"]
@@ -48,21 +46,10 @@ def main() -> None:
     for n in args.ns:
         env = gym.make("ShelfSort-v0", num_objects=n, object_set="ycb", pixel_size=pixel)
         try:
-            states = []
-            for run in range(args.decisions):
-                obs, _ = env.reset(seed=scene_seed(0, n, run))
-                states.append((run, obs, env.unwrapped.action_masks()))
-            one = seconds_per_call(lambda s: models[0].predict(s[1], deterministic=True, action_masks=s[2]), states)
-            mean = seconds_per_call(lambda s: ensemble.predict(s[1], action_masks=s[2]), states)
-
-            stepped = 0.0
-            for run, obs, masks in states[:5]:
-                env.reset(seed=scene_seed(0, n, run))
-                action = int(ensemble.predict(obs, action_masks=masks)[0])
-                start = time.perf_counter()
-                env.step(action)
-                stepped += time.perf_counter() - start
-            step = stepped / len(states[:5])
+            states = first_states(env, n, args.decisions)
+            one = seconds_per_call(lambda s: models[0].predict(s[0], deterministic=True, action_masks=s[1]), states)
+            mean = seconds_per_call(lambda s: ensemble.predict(s[0], action_masks=s[1]), states)
+            step = seconds_per_action(env, n, states, lambda o, m: ensemble.predict(o, action_masks=m)[0])
         finally:
             env.close()
         print(f"N = {n:2d}: one model {one * 1e3:6.1f} ms, ensemble of {len(models)} {mean * 1e3:6.1f} ms per "

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import gymnasium as gym
@@ -21,10 +20,9 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.timing import seconds_per_call  # noqa: E402
+from benchmarks.timing import first_states, seconds_per_action, seconds_per_call  # noqa: E402
 from research.symmetric_q import SymmetricQ  # noqa: E402
 from sb3_pixeldqn import PixelDoubleDQN  # noqa: E402
-from shelf_env.evaluation.protocol import scene_seed  # noqa: E402
 from shelf_env.policies import checkpoint_pixel_size  # noqa: E402
 
 
@@ -42,23 +40,14 @@ def main() -> None:
     for n in args.ns:
         env = gym.make("ShelfSort-v0", num_objects=n, object_set="ycb", pixel_size=pixel)
         try:
-            states = []
-            for run in range(args.decisions):
-                obs, _ = env.reset(seed=scene_seed(0, n, run))
-                states.append((obs, env.unwrapped.action_masks()))
+            states = first_states(env, n, args.decisions)
             sym = SymmetricQ.for_env(model, env)
             plain_s = seconds_per_call(lambda s: model.predict(s[0], deterministic=True, action_masks=s[1]), states)
             sym_s = seconds_per_call(lambda s, sym=sym: sym.predict(s[0], action_masks=s[1]), states)
             differ = sum(int(model.predict(o, deterministic=True, action_masks=m)[0])
                          != int(sym.predict(o, action_masks=m)[0]) for o, m in states)
-            steps = []
-            for run, (obs, masks) in enumerate(states[:5]):
-                env.reset(seed=scene_seed(0, n, run))
-                action = int(model.predict(obs, deterministic=True, action_masks=masks)[0])
-                start = time.perf_counter()
-                env.step(action)
-                steps.append(time.perf_counter() - start)
-            step_s = sum(steps) / len(steps)
+            step_s = seconds_per_action(env, n, states,
+                                        lambda o, m: model.predict(o, deterministic=True, action_masks=m)[0])
         finally:
             env.close()
         print(f"N = {n:2d}: plain {plain_s * 1e3:6.1f} ms, symmetric ({sym.n_views} views) {sym_s * 1e3:6.1f} ms per "
