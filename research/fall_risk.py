@@ -518,6 +518,79 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
 
 #: Thresholds `greedy_check` sweeps, beside the model's own.
 SWEEP = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
+#: How `object_pooled` spreads a per-cell risk over the object under the cell.
+POOLINGS = ("cell", "mean", "max")
+#: The soft penalties `penalty_check` tries, in units of the spread of the checkpoint's pick Q-values.
+PENALTIES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
+
+
+def object_pooled(risk: np.ndarray, obs: np.ndarray, pooling: str) -> np.ndarray:
+    """``risk`` (H, W) with every object cell set to the mean (``"mean"``) or maximum (``"max"``) risk of
+    its object: the blob of one class colour it belongs to in ``obs`` (`ObservationView`; touching objects of
+    one class are one blob). Cells on no object keep their own risk; ``"cell"`` returns ``risk`` unchanged.
+    Why: most falls belong to the object a pick lifts, not to the cell it lifts it by."""
+    if pooling not in POOLINGS:
+        raise ValueError(f"pooling must be one of {POOLINGS}, got {pooling!r}")
+    if pooling == "cell":
+        return risk
+    blob = ObservationView.from_observation(obs, 0).blob
+    on = blob >= 0
+    if not on.any():
+        return risk
+    n = int(blob.max()) + 1
+    if pooling == "mean":
+        per = np.bincount(blob[on], risk[on], n) / np.bincount(blob[on], minlength=n)
+    else:
+        per = np.full(n, -np.inf)
+        np.maximum.at(per, blob[on], risk[on])
+    out = np.array(risk, dtype=np.float64, copy=True)
+    out[on] = per[blob[on]]
+    return out
+
+
+def choose(groups: list[np.ndarray], values: np.ndarray, risk: np.ndarray, threshold: float | None = None,
+           penalty: float | None = None) -> np.ndarray:
+    """Per state (``groups``: the indices of its labels), the label a choice lands on: the highest value
+    among the labels at risk below ``threshold`` (all of them where none is), or the highest
+    ``values - penalty * risk``. Neither: the highest value."""
+    out = np.empty(len(groups), np.int64)
+    for k, index in enumerate(groups):
+        q = values[index]
+        if penalty is not None:
+            q = q - penalty * risk[index]
+        elif threshold is not None:
+            kept = risk[index] < threshold
+            if kept.any():
+                q = np.where(kept, q, -np.inf)
+        out[k] = index[int(np.argmax(q))]
+    return out
+
+
+def held_out_scores(data: pathlib.Path, risk: FallRiskModel, checkpoint: str, val_fraction: float | None = None,
+                    poolings: tuple[str, ...] = ("cell",)) -> tuple[Split, np.ndarray, dict[str, np.ndarray],
+                                                                  list[np.ndarray]]:
+    """The held-out split of ``data`` the fall-risk model was trained with (`load_splits` with its
+    ``val_fraction`` and ``max_shards``), the checkpoint's pick Q-value at each of its labels, the risk
+    at each label under each of ``poolings`` (`object_pooled`), and per state the indices of its labels."""
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    info = getattr(risk, "info", {})
+    fraction = val_fraction if val_fraction is not None else float(info.get("val_fraction", 0.15))
+    _, val = load_splits(data, fraction, info.get("max_shards"))
+    model = PixelDoubleDQN.load(checkpoint, device="cpu")
+    pick = [name for name, _ in model.policy.maps].index("pick")
+    cells, states = val.cell.numpy(), val.state.numpy()
+    values = np.zeros(len(cells))
+    scored = {how: np.zeros(len(cells)) for how in poolings}
+    order = np.argsort(states, kind="stable")
+    groups = np.split(order, np.flatnonzero(np.diff(states[order])) + 1) if len(order) else []
+    for index in groups:
+        obs = val.obs[int(states[index[0]])].numpy()
+        values[index] = model.policy.q_map_values(obs)[pick].reshape(-1)[cells[index]]
+        p = risk.risk(obs)
+        for how in poolings:
+            scored[how][index] = object_pooled(p, obs, how).reshape(-1)[cells[index]]
+    return val, values, scored, groups
 
 
 def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
@@ -534,30 +607,12 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
     ``oracle_*``: the same under a perfect filter (the labels themselves), what the checkpoint's ranking of
     the safe picks gives when no fall gets through; ``q_auc``: how well the checkpoint's own Q-values rank the
     same labels (low value as risk)."""
-    from sb3_pixeldqn import PixelDoubleDQN
-
-    info = getattr(risk, "info", {})
-    fraction = val_fraction if val_fraction is not None else float(info.get("val_fraction", 0.15))
-    _, val = load_splits(data, fraction, info.get("max_shards"))
-    model = PixelDoubleDQN.load(checkpoint, device="cpu")
-    pick = [name for name, _ in model.policy.maps].index("pick")
-    labels, cells, states = val.label.numpy(), val.cell.numpy(), val.state.numpy()
-    values = np.zeros(len(labels))  # the checkpoint's Q-value at each label
-    scored = np.zeros(len(labels))  # the fall-risk model's probability at each label
-    groups = [np.flatnonzero(states == t) for t in np.unique(states)]
-    for index in groups:
-        obs = val.obs[int(states[index[0]])].numpy()
-        values[index] = model.policy.q_map_values(obs)[pick].reshape(-1)[cells[index]]
-        scored[index] = risk.risk(obs).reshape(-1)[cells[index]]
+    val, values, pooled, groups = held_out_scores(data, risk, checkpoint, val_fraction)
+    scored = pooled["cell"]
+    labels, states = val.label.numpy(), val.state.numpy()
 
     def choices(threshold: float, risky: np.ndarray = scored) -> np.ndarray:
-        """Per state, the label the filtered choice lands on (the unfiltered one where nothing is kept)."""
-        out = np.empty(len(groups), np.int64)
-        for k, index in enumerate(groups):
-            kept = risky[index] < threshold
-            q = np.where(kept, values[index], -np.inf) if kept.any() else values[index]
-            out[k] = index[int(np.argmax(q))]
-        return out
+        return choose(groups, values, risky, threshold)
 
     def outcome(chosen: np.ndarray, name: str) -> dict[str, float]:
         result = {f"{name}_invalid": float(labels[chosen].mean()) if len(chosen) else float("nan")}
@@ -578,6 +633,54 @@ def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,
                                       "auc": auc(labels[n_of_label == n], scored[n_of_label == n])}
                              for n in np.unique(n_of_label)}
     return out
+
+
+def penalty_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str, poolings: tuple[str, ...] = POOLINGS,
+                  thresholds: tuple[float, ...] = SWEEP, penalties: tuple[float, ...] = PENALTIES,
+                  max_invalid: float = 0.06, val_fraction: float | None = None) -> dict[str, Any]:
+    """The fall risk pooled over objects and used as a mask or as a soft penalty, offline
+    (docs/experiments/object-fall-penalty.md): on the held-out split of ``data`` (`held_out_scores`), for
+    each of ``poolings`` the AUC of the pooled risk on the pick labels, and the invalid share and mean
+    change in sorted objects of the checkpoint's choice among the labelled picks under each rule: ``hard``
+    (mask risk >= t, t in ``thresholds``) and ``soft`` (highest Q - lambda * sigma * risk, lambda in
+    ``penalties``, sigma the standard deviation of the Q-values at all the labels). ``unfiltered`` and
+    ``oracle`` (a perfect filter) for reference. ``candidate``: `penalty_candidate` with ``max_invalid``."""
+    val, values, scored, groups = held_out_scores(data, risk, checkpoint, val_fraction, poolings)
+    labels = val.label.numpy()
+    if val.sorted_change is None:
+        raise ValueError(f"{data} is not a teacher dataset (sNN_NNNNN.npz): its labels carry no change in sorted "
+                         "objects to weigh a penalty against")
+    dsorted = val.sorted_change
+
+    def outcome(chosen: np.ndarray) -> dict[str, float]:
+        return {"invalid": float(labels[chosen].mean()), "sorted": float(dsorted[chosen].mean())}
+
+    sigma = float(values.std())
+    out: dict[str, Any] = {"checkpoint": checkpoint, "val_states": len(groups), "labels": len(labels),
+                           "q_sigma": sigma, "max_invalid": max_invalid,
+                           "unfiltered": outcome(choose(groups, values, labels)),
+                           "oracle": outcome(choose(groups, values, labels, threshold=0.5)), "poolings": {}}
+    for how in poolings:
+        r = scored[how]
+        out["poolings"][how] = {
+            "auc": auc(labels, r),
+            "hard": [{"threshold": t, **outcome(choose(groups, values, r, threshold=t))} for t in thresholds],
+            "soft": [{"penalty": lam, **outcome(choose(groups, values, r, penalty=lam * sigma))}
+                     for lam in penalties]}
+    out["candidate"] = penalty_candidate(out, max_invalid)
+    return out
+
+
+def penalty_candidate(result: dict[str, Any], max_invalid: float) -> dict[str, Any] | None:
+    """The plan's offline rule on a `penalty_check` result: among the settings (pooling, hard threshold or
+    soft penalty) whose choices sort at least as much per choice as the unfiltered choice and are invalid
+    at most ``max_invalid`` of the time, the one with the lowest invalid share (ties: the more sorted);
+    None if none qualifies."""
+    floor = result["unfiltered"]["sorted"]
+    ok = [{"pooling": how, "rule": rule, **entry}
+          for how, block in result["poolings"].items() for rule in ("hard", "soft") for entry in block[rule]
+          if entry["sorted"] >= floor and entry["invalid"] <= max_invalid]
+    return min(ok, key=lambda e: (e["invalid"], -e["sorted"])) if ok else None
 
 
 def rethreshold(model_path: pathlib.Path, data: pathlib.Path, recall: float, out: pathlib.Path) -> dict[str, Any]:
@@ -710,9 +813,21 @@ def main(argv: list[str] | None = None) -> int:
     k.add_argument("--model", type=pathlib.Path, required=True, help="the fall-risk model (.pt)")
     k.add_argument("--checkpoint", required=True, help="the P+S / S zip whose choice is filtered")
     k.add_argument("--out", type=pathlib.Path, default=None, help="also write the result here (JSON)")
+    e = sub.add_parser("penalty", help="the risk pooled over objects, as a mask or a soft penalty, held out")
+    e.add_argument("--data", type=pathlib.Path, required=True)
+    e.add_argument("--model", type=pathlib.Path, required=True, help="the fall-risk model (.pt)")
+    e.add_argument("--checkpoint", required=True, help="the P+S / S zip whose choice is penalised")
+    e.add_argument("--max-invalid", type=float, default=0.06, help="the candidate's largest invalid share")
+    e.add_argument("--out", type=pathlib.Path, default=None, help="also write the result here (JSON)")
     args = parser.parse_args(argv)
     try:  # a bad input is one line on stderr and exit status 2, before anything is written
-        if args.command == "check":
+        if args.command == "penalty":
+            result = penalty_check(args.data, FallRiskModel.load(args.model), args.checkpoint,
+                                   max_invalid=args.max_invalid)
+            print(json.dumps(result, indent=1))
+            if args.out is not None:
+                write_json_atomically(args.out, result)
+        elif args.command == "check":
             result = greedy_check(args.data, FallRiskModel.load(args.model), args.checkpoint)
             print(json.dumps(result, indent=1))
             if args.out is not None:
