@@ -401,3 +401,86 @@ def test_coordinate_channels_start_as_the_pick_fcn_keep_the_mirror_and_survive_a
     plain = fr.FallRiskModel(4, widths=(4, 8, 8))
     plain.save(tmp_path / "p.pt")
     assert not fr.FallRiskModel.load(tmp_path / "p.pt").coords
+
+
+def test_object_pooling_spreads_the_risk_over_each_object():
+    """Each object (a blob of one class colour; touching objects of two classes stay two) takes its mean or
+    maximum risk; cells on no object keep theirs; ``cell`` changes nothing; an unknown pooling is refused."""
+    from shelf_env.camera.heightmap import CLASS_RGB
+
+    obs = np.full((4, 10, 12), 255, np.uint8)
+    blobs = {0: (slice(1, 3), slice(1, 4)), 1: (slice(1, 3), slice(4, 6)), 2: (slice(6, 9), slice(8, 11))}
+    for colour, where in zip((CLASS_RGB[0], CLASS_RGB[1], CLASS_RGB[0]), blobs.values()):
+        obs[:3][(slice(None), *where)] = np.asarray(colour, np.uint8)[:, None, None]
+    risk = np.random.default_rng(0).random((10, 12))
+    mean, high = fr.object_pooled(risk, obs, "mean"), fr.object_pooled(risk, obs, "max")
+    on = np.zeros((10, 12), bool)
+    for where in blobs.values():
+        on[where] = True
+        assert np.allclose(mean[where], risk[where].mean()) and np.allclose(high[where], risk[where].max())
+    assert np.array_equal(mean[~on], risk[~on]) and np.array_equal(high[~on], risk[~on])
+    assert fr.object_pooled(risk, obs, "cell") is risk
+    assert np.array_equal(fr.object_pooled(risk, np.full_like(obs, 255), "mean"), risk)  # no object at all
+    with pytest.raises(ValueError, match="pooling must be one of"):
+        fr.object_pooled(risk, obs, "median")
+
+
+def test_choose_masks_or_penalises_the_risk():
+    groups = [np.array([0, 1, 2]), np.array([3, 4])]
+    values = np.array([3.0, 2.0, 1.0, 5.0, 4.9])
+    risk = np.array([0.9, 0.5, 0.1, 0.2, 0.0])
+    assert fr.choose(groups, values, risk).tolist() == [0, 3]  # the highest value
+    assert fr.choose(groups, values, risk, threshold=0.15).tolist() == [2, 4]
+    assert fr.choose(groups, values, risk, threshold=0.05).tolist() == [0, 4]  # nothing kept: unmasked
+    assert fr.choose(groups, values, risk, penalty=1.0).tolist() == [0, 4]  # 3 - 0.9 > 2 - 0.5; 4.9 > 5 - 0.2
+    assert fr.choose(groups, values, risk, penalty=3.0).tolist() == [2, 4]  # 1 - 0.3 > 2 - 1.5 > 3 - 2.7
+
+
+def test_the_penalty_check_and_its_candidate(tmp_path):
+    """On a synthetic teacher dataset with a risk that flags exactly the invalid picks (dark cells): every
+    hard threshold and a large enough penalty leave only the states where every labelled pick was invalid;
+    a risk of zero changes nothing; the candidate is the plan's rule on the result."""
+    synthetic_teacher_shards(tmp_path / "data")
+    env = gym.make("ShelfSort-v0", pixel_size=0.02)
+    PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0), ("push", 0), ("push", 180)],
+                                                        widths=(4, 8, 8)), seed=0).save(tmp_path / "p.zip")
+    env.close()
+
+    class Dark(FixedRisk):
+        info = {"val_fraction": 0.25}
+
+        def risk(self, obs):
+            return (np.asarray(obs)[0] == 0).astype(float)
+
+    _, val = fr.load_splits(tmp_path / "data", 0.25)
+    result = fr.penalty_check(tmp_path / "data", Dark(None), str(tmp_path / "p.zip"), penalties=(1e-9, 1e9))
+    all_invalid = np.mean([bool(val.label[val.state == t].all()) for t in range(18)])
+    assert result["val_states"] == 18 and result["labels"] == len(val.label) and result["q_sigma"] > 0
+    assert result["oracle"]["invalid"] == pytest.approx(all_invalid)
+    assert list(result["poolings"]) == list(fr.POOLINGS)
+    for block in result["poolings"].values():  # no class colour in the synthetic images: pooling changes nothing
+        assert block["auc"] == 1.0
+        assert all(e["invalid"] == pytest.approx(all_invalid) for e in block["hard"])
+        assert block["soft"][0] == {"penalty": 1e-9, **result["unfiltered"]}  # a negligible penalty
+        assert block["soft"][1]["invalid"] == pytest.approx(all_invalid)
+        assert all(e["sorted"] == pytest.approx(1 - e["invalid"]) for e in block["hard"] + block["soft"])
+    assert result["unfiltered"]["invalid"] > all_invalid
+    best = result["candidate"]
+    assert best is not None and best["invalid"] == pytest.approx(all_invalid) and best["pooling"] == "cell"
+    assert best["rule"] == "hard" and best["threshold"] == fr.SWEEP[0]  # the first of the equal best
+    crafted = {"unfiltered": {"invalid": 0.1, "sorted": 0.5}, "poolings": {
+        "cell": {"hard": [{"threshold": 0.1, "invalid": 0.01, "sorted": 0.4},  # safest, but sorts less
+                          {"threshold": 0.5, "invalid": 0.05, "sorted": 0.5}],
+                 "soft": [{"penalty": 1.0, "invalid": 0.05, "sorted": 0.52}]},
+        "mean": {"hard": [{"threshold": 0.2, "invalid": 0.07, "sorted": 0.6}], "soft": []}}}
+    assert fr.penalty_candidate(crafted, 0.06) == {"pooling": "cell", "rule": "soft", "penalty": 1.0,
+                                                   "invalid": 0.05, "sorted": 0.52}  # the tie goes to the more sorted
+    assert fr.penalty_candidate(crafted, 0.08)["pooling"] == "cell"
+    assert fr.penalty_candidate(crafted, 0.04) is None
+    zero = fr.penalty_check(tmp_path / "data", type("Zero", (Dark,), {"risk": lambda self, obs: np.zeros((20, 30))})(
+        None), str(tmp_path / "p.zip"))
+    rows = [e for b in zero["poolings"].values() for e in b["hard"] + b["soft"]]
+    assert all(e["invalid"] == zero["unfiltered"]["invalid"] for e in rows)
+    assert fr.main(["penalty", "--data", str(tmp_path / "episodes"), "--model", str(tmp_path / "m.pt"),
+                    "--checkpoint", "p.zip", "--out", str(tmp_path / "x.json")]) == 2
+    assert not (tmp_path / "x.json").exists()
