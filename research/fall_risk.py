@@ -459,8 +459,29 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
                          f"{val_fraction}")
     if recall is not None and not 0 < recall <= 1:
         raise ValueError(f"recall must be in (0, 1], got {recall}")
-    th.manual_seed(seed)
     train, val = load_splits(data, val_fraction, max_shards, max_states)
+    model, history, best_epoch = fit_fall_risk(train, val, init, epochs, batch, lr, seed, coords)
+    p, labels = scores(model, val), val.label.numpy()
+    model.threshold = pick_threshold(labels, p) if recall is None else recall_threshold(labels, p, recall)
+    report = {"obs_shape": list(train.obs.shape[1:]), "data": str(data), "max_shards": max_shards,
+              "max_states": max_states,
+              "val_fraction": val_fraction, "recall_target": recall,
+              "train_states": len(train.obs), "train_probes": len(train.label), "train_invalid": int(train.label.sum()),
+              "val_states": len(val.obs), "val_probes": len(labels), "val_invalid": int(labels.sum()),
+              "val_auc": auc(labels, p), **threshold_report(labels, p, model.threshold),
+              "epochs": epochs, "best_epoch": best_epoch,
+              "init": init, "coords": coords, "history": history}
+    model.save(out, report)
+    return report
+
+
+def fit_fall_risk(train: Split, val: Split, init: str | None = None, epochs: int = 8, batch: int = 32,
+                  lr: float = 3e-4, seed: int = 0, coords: bool = False
+                  ) -> tuple[FallRiskModel, list[dict[str, float]], int]:
+    """`train_fall_risk`'s fit on given splits: a `FallRiskModel` (started from ``init``'s pick FCN) trained
+    ``epochs`` epochs on ``train``'s labels, with the weights of the epoch whose AUC on ``val`` is best.
+    Returns the model (its threshold unset: 0.5), the per-epoch history and that epoch."""
+    th.manual_seed(seed)
     model = FallRiskModel(int(train.obs.shape[1]), coords=coords)
     if init is not None:
         from sb3_pixeldqn import PixelDoubleDQN
@@ -502,18 +523,7 @@ def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = No
             best = (history[-1]["val_auc"], epoch + 1, {k: v.clone() for k, v in model.state_dict().items()})
     if best[2]:  # (with no held-out fall to rank, the AUC is undefined and the last epoch stays)
         model.load_state_dict(best[2])
-    p, labels = scores(model, val), val.label.numpy()
-    model.threshold = pick_threshold(labels, p) if recall is None else recall_threshold(labels, p, recall)
-    report = {"obs_shape": list(train.obs.shape[1:]), "data": str(data), "max_shards": max_shards,
-              "max_states": max_states,
-              "val_fraction": val_fraction, "recall_target": recall,
-              "train_states": len(train.obs), "train_probes": len(train.label), "train_invalid": int(train.label.sum()),
-              "val_states": len(val.obs), "val_probes": len(labels), "val_invalid": int(labels.sum()),
-              "val_auc": auc(labels, p), **threshold_report(labels, p, model.threshold),
-              "epochs": epochs, "best_epoch": best[1],
-              "init": init, "coords": coords, "history": history}
-    model.save(out, report)
-    return report
+    return model, history, best[1]
 
 
 #: Thresholds `greedy_check` sweeps, beside the model's own.
@@ -646,22 +656,28 @@ def penalty_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str, pool
     ``penalties``, sigma the standard deviation of the Q-values at all the labels). ``unfiltered`` and
     ``oracle`` (a perfect filter) for reference. ``candidate``: `penalty_candidate` with ``max_invalid``."""
     val, values, scored, groups = held_out_scores(data, risk, checkpoint, val_fraction, poolings)
-    labels = val.label.numpy()
     if val.sorted_change is None:
         raise ValueError(f"{data} is not a teacher dataset (sNN_NNNNN.npz): its labels carry no change in sorted "
                          "objects to weigh a penalty against")
-    dsorted = val.sorted_change
+    return {"checkpoint": checkpoint, **penalty_report(val.label.numpy(), val.sorted_change, values, scored, groups,
+                                                       thresholds, penalties, max_invalid)}
+
+
+def penalty_report(labels: np.ndarray, dsorted: np.ndarray, values: np.ndarray, scored: dict[str, np.ndarray],
+                   groups: list[np.ndarray], thresholds: tuple[float, ...] = SWEEP,
+                   penalties: tuple[float, ...] = PENALTIES, max_invalid: float = 0.06) -> dict[str, Any]:
+    """`penalty_check`'s report on given arrays: per label its fall (``labels``), change in sorted objects
+    and checkpoint Q-value, and under each name of ``scored`` (a pooling, a view) the risk at each label;
+    ``groups``: per state the indices of its labels."""
 
     def outcome(chosen: np.ndarray) -> dict[str, float]:
         return {"invalid": float(labels[chosen].mean()), "sorted": float(dsorted[chosen].mean())}
 
     sigma = float(values.std())
-    out: dict[str, Any] = {"checkpoint": checkpoint, "val_states": len(groups), "labels": len(labels),
-                           "q_sigma": sigma, "max_invalid": max_invalid,
-                           "unfiltered": outcome(choose(groups, values, labels)),
+    out: dict[str, Any] = {"val_states": len(groups), "labels": len(labels), "q_sigma": sigma,
+                           "max_invalid": max_invalid, "unfiltered": outcome(choose(groups, values, labels)),
                            "oracle": outcome(choose(groups, values, labels, threshold=0.5)), "poolings": {}}
-    for how in poolings:
-        r = scored[how]
+    for how, r in scored.items():
         out["poolings"][how] = {
             "auc": auc(labels, r),
             "hard": [{"threshold": t, **outcome(choose(groups, values, r, threshold=t))} for t in thresholds],
