@@ -156,10 +156,11 @@ def subset(split: fall_risk.Split, keep: np.ndarray, obs: th.Tensor | None = Non
 
 
 def compare(data: pathlib.Path, folder: pathlib.Path, checkpoint: str, out: pathlib.Path, val_fraction: float,
-            max_shards: str | None, max_states: int | None, epochs: int = 8, models: pathlib.Path | None = None
-            ) -> dict[str, Any]:
+            max_shards: str | None, max_states: int | None, epochs: int = 8, models: pathlib.Path | None = None,
+            init: str | None = "checkpoint") -> dict[str, Any]:
     """Train the camera and the top-down fall model on the same replayed states (see the module docstring) and
-    write their report to ``out`` (JSON; with ``models``, each model too, ``<view>.fall_risk.pt``)."""
+    write their report to ``out`` (JSON; with ``models``, each model too, ``<view>.fall_risk.pt``). Both start
+    from ``init``'s pick FCN: ``"checkpoint"`` (the default) the checkpoint's, None from scratch."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     shards, train_index, val_index = chosen_states(data, val_fraction, max_shards, max_states)
@@ -176,14 +177,15 @@ def compare(data: pathlib.Path, folder: pathlib.Path, checkpoint: str, out: path
         values[index] = q_model.policy.q_map_values(val_cam.obs[int(states[index[0]])].numpy())[pick].reshape(-1)[
             cells[index]]
     report: dict[str, Any] = {
-        "checkpoint": checkpoint, "max_shards": max_shards, "max_states": max_states, "val_fraction": val_fraction,
+        "checkpoint": checkpoint, "init": checkpoint if init == "checkpoint" else init, "max_shards": max_shards,
+        "max_states": max_states, "val_fraction": val_fraction,
         "train_states": len(train_cam.obs), "train_dropped": len(train.obs) - len(train_cam.obs),
         "train_labels": len(train_cam.label), "val_states": len(val_cam.obs),
         "val_dropped": len(val.obs) - len(val_cam.obs), "val_labels": len(labels),
         "val_invalid": float(labels.mean()), "views": {}}
     scored = {}
     for view, tr, va in (("camera", train_cam, val_cam), ("topdown", train_top, val_top)):
-        model, history, best = fall_risk.fit_fall_risk(tr, va, checkpoint, epochs)
+        model, history, best = fall_risk.fit_fall_risk(tr, va, report["init"], epochs)
         p = fall_risk.scores(model, va)
         model.threshold = fall_risk.pick_threshold(labels, p)
         scored[view] = p
@@ -215,6 +217,8 @@ def main(argv: list[str] | None = None) -> int:
         else:
             p.add_argument("--checkpoint", required=True, help="the P+S zip: the models' start, the Q-values")
             p.add_argument("--epochs", type=int, default=8)
+            p.add_argument("--init", default="checkpoint",
+                           help="the zip whose pick FCN starts both models ('checkpoint': --checkpoint; 'none')")
             p.add_argument("--out", type=pathlib.Path, required=True, help="the report (JSON)")
             p.add_argument("--models", type=pathlib.Path, default=None, help="also save both models here")
     args = parser.parse_args(argv)
@@ -230,7 +234,8 @@ def main(argv: list[str] | None = None) -> int:
             if args.models is not None:
                 args.models.mkdir(parents=True, exist_ok=True)
             report = compare(args.data, args.replays, args.checkpoint, args.out, args.val_fraction, args.max_shards,
-                             args.max_states, args.epochs, args.models)
+                             args.max_states, args.epochs, args.models,
+                             None if args.init == "none" else args.init)
             print(json.dumps({k: v for k, v in report.items() if k not in ("views", "offline")} |
                              {v: r["val_auc"] for v, r in report["views"].items()}))
     except ValueError as err:

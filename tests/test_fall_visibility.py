@@ -100,6 +100,10 @@ def test_the_comparison_trains_both_views_on_the_same_labels(shards, tmp_path):
     assert report["offline"]["labels"] == len(val.label)
     for view in ("camera", "topdown"):
         assert fr.FallRiskModel.load(tmp_path / f"{view}.fall_risk.pt").info["view"] == view
+    assert report["init"] == "examples/pretrained/v1/p_s.zip"
+    scratch = fv.compare(shards, tmp_path / "r", "examples/pretrained/v1/p_s.zip", tmp_path / "s.json", 0.25, None,
+                         None, epochs=1, init=None)
+    assert scratch["init"] is None and scratch["val_labels"] == report["val_labels"]
     (tmp_path / "r" / "s00_00001.npz").unlink()
     with pytest.raises(ValueError, match="no top-down replay of s00_00001.npz"):
         fv.compare(shards, tmp_path / "r", "examples/pretrained/v1/p_s.zip", tmp_path / "d.json", 0.25, None, None)

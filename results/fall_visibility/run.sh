@@ -24,3 +24,6 @@ done
 wait
 [ -f "$out/compare.json" ] || python -m research.fall_visibility compare "${split[@]}" \
     --checkpoint examples/pretrained/p_s.zip --out "$out/compare.json" --models "$out/models"
+#   3. the same from scratch (both models; their start was the camera-trained pick FCN) -> compare_scratch.json
+[ -f "$out/compare_scratch.json" ] || python -m research.fall_visibility compare "${split[@]}" \
+    --checkpoint examples/pretrained/p_s.zip --init none --out "$out/compare_scratch.json"
