@@ -62,3 +62,18 @@ done
     --out "$out/curve/ff_coords.fall_risk.pt" | tee "$out/curve/train_coords.log"
 [ -f "$out/curve/check_coords.json" ] || python -m research.fall_risk check --data data/teacher \
     --model "$out/curve/ff_coords.fall_risk.pt" --checkpoint "$shipped" --out "$out/curve/check_coords.json"
+# 6. (the fifteenth session) the same recipe from scratch (--init none): all training states, then the first 1,675 and
+#    6,698 (the 3,349 point: results/fall_visibility/compare_scratch.json's camera row), and the full model's offline
+#    check of docs/experiments/object-fall-penalty.md -> scratch/
+mkdir -p "$out/scratch"
+[ -f "$out/scratch/ff_scratch.fall_risk.pt" ] || python -m research.fall_risk train --data data/teacher \
+    --max-shards "$shards" --val-fraction 0.2 --init none --epochs 8 --out "$out/scratch/ff_scratch.fall_risk.pt" \
+    | tee "$out/scratch/train_scratch.log"
+[ -f "$out/scratch/penalty_scratch.json" ] || python -m research.fall_risk penalty --data data/teacher \
+    --model "$out/scratch/ff_scratch.fall_risk.pt" --checkpoint "$shipped" --out "$out/scratch/penalty_scratch.json" \
+    > /dev/null
+for k in 1675 6698; do
+    [ -f "$out/scratch/ff_scratch_$k.fall_risk.pt" ] || python -m research.fall_risk train --data data/teacher \
+        --max-shards "$shards" --max-states "$k" --val-fraction 0.2 --init none --epochs 8 \
+        --out "$out/scratch/ff_scratch_$k.fall_risk.pt" | tee "$out/scratch/train_scratch_$k.log"
+done
