@@ -169,6 +169,11 @@ E=p_s_dagger289_aug_mpa_r2_ce1_ens3_avg4
   --pair $E p_s_dagger289_aug_mpa_r2_ce1_avg4 --pair $E p_s_dagger289_aug_mpa_r2_ce1_seed1_avg4 \
   --pair $E p_s_dagger289_aug_mpa_r2_ce1_seed2_avg4 \
   --out "$DIR/val90_seeds.md"
+# The fifteenth session: the tenth point, all 430 shards at its start (55 + 50 + 205 + 80 of series 3 + 40 of series 4),
+# averaged and plain from one run
+SHARDS=s00:55,s01:50,s02:205,s03:80,s04:40 distil p_s_dagger375_aug_mpa_r2_ce1_avg4 all --anchor 1.0 --teacher-radius 2 \
+  --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger375_aug_mpa_r2_ce1.zip"
+cp "$M/p_s_dagger375_aug_mpa_r2_ce1.distill.json" "$DIR/"
 # every model's cells on the validation scenes aggregated into val90/results.json, results.csv and the plot
 V90=(p_s_dagger150_aug_mpa_r2_ce1_avg4 p_s_dagger150_aug_mpa_r2_ce1 p_s_dagger150_aug_mpa_r2_ce1_seed1_avg4
   p_s_dagger150_aug_mpa_r2_ce1_seed1 p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 p_s_dagger201_aug_mpa_r2_ce1_avg4
