@@ -174,10 +174,16 @@ E=p_s_dagger289_aug_mpa_r2_ce1_ens3_avg4
 SHARDS=s00:55,s01:50,s02:205,s03:80,s04:40 distil p_s_dagger375_aug_mpa_r2_ce1_avg4 all --anchor 1.0 --teacher-radius 2 \
   --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger375_aug_mpa_r2_ce1.zip"
 cp "$M/p_s_dagger375_aug_mpa_r2_ce1.distill.json" "$DIR/"
+# ... its averaged model on the validation scenes (evaluation seeds 2000-2002, 90 per N at N = 5, 8, 11): the page's rule
+"$PY" -m shelf_env.cli.evaluate --policies "$M/p_s_dagger375_aug_mpa_r2_ce1_avg4.zip" --ns 5,8,11 --runs 30 --seeds 3 \
+  --first-seed 2000 --object-sets ycb --workers 2 --out "$DIR/val90"
+"$PY" -m shelf_env.evaluation.compare "$DIR/val90" --pair p_s_dagger375_aug_mpa_r2_ce1_avg4 \
+  p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 --out "$DIR/val90_tenth.md"
 # every model's cells on the validation scenes aggregated into val90/results.json, results.csv and the plot
 V90=(p_s_dagger150_aug_mpa_r2_ce1_avg4 p_s_dagger150_aug_mpa_r2_ce1 p_s_dagger150_aug_mpa_r2_ce1_seed1_avg4
   p_s_dagger150_aug_mpa_r2_ce1_seed1 p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4 p_s_dagger201_aug_mpa_r2_ce1_avg4
-  p_s_dagger289_aug_mpa_r2_ce1_avg4 p_s_dagger289_aug_mpa_r2_ce1_seed1_avg4 p_s_dagger289_aug_mpa_r2_ce1_seed2_avg4)
+  p_s_dagger289_aug_mpa_r2_ce1_avg4 p_s_dagger289_aug_mpa_r2_ce1_seed1_avg4 p_s_dagger289_aug_mpa_r2_ce1_seed2_avg4
+  p_s_dagger375_aug_mpa_r2_ce1_avg4)
 P=()
 for v in "${V90[@]}"; do P+=("$M/$v.zip"); done
 "$PY" -m shelf_env.cli.evaluate --policies "${P[@]}" "$M/$E.ensemble.json" --ns 5,8,11 \
