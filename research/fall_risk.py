@@ -586,25 +586,35 @@ def held_out_scores(data: pathlib.Path, risk: FallRiskModel, checkpoint: str, va
     """The held-out split of ``data`` the fall-risk model was trained with (`load_splits` with its
     ``val_fraction`` and ``max_shards``), the checkpoint's pick Q-value at each of its labels, the risk
     at each label under each of ``poolings`` (`object_pooled`), and per state the indices of its labels."""
-    from sb3_pixeldqn import PixelDoubleDQN
-
     info = getattr(risk, "info", {})
     fraction = val_fraction if val_fraction is not None else float(info.get("val_fraction", 0.15))
     _, val = load_splits(data, fraction, info.get("max_shards"))
-    model = PixelDoubleDQN.load(checkpoint, device="cpu")
-    pick = [name for name, _ in model.policy.maps].index("pick")
+    values, groups = pick_values(checkpoint, val)
     cells, states = val.cell.numpy(), val.state.numpy()
-    values = np.zeros(len(cells))
     scored = {how: np.zeros(len(cells)) for how in poolings}
-    order = np.argsort(states, kind="stable")
-    groups = np.split(order, np.flatnonzero(np.diff(states[order])) + 1) if len(order) else []
     for index in groups:
         obs = val.obs[int(states[index[0]])].numpy()
-        values[index] = model.policy.q_map_values(obs)[pick].reshape(-1)[cells[index]]
         p = risk.risk(obs)
         for how in poolings:
             scored[how][index] = object_pooled(p, obs, how).reshape(-1)[cells[index]]
     return val, values, scored, groups
+
+
+def pick_values(checkpoint: str, split: Split) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The checkpoint's pick Q-value at each label of ``split`` (read from its observations), and per state
+    (in order) the indices of its labels."""
+    from sb3_pixeldqn import PixelDoubleDQN
+
+    model = PixelDoubleDQN.load(checkpoint, device="cpu")
+    pick = [name for name, _ in model.policy.maps].index("pick")
+    cells, states = split.cell.numpy(), split.state.numpy()
+    values = np.zeros(len(cells))
+    order = np.argsort(states, kind="stable")
+    groups = np.split(order, np.flatnonzero(np.diff(states[order])) + 1) if len(order) else []
+    for index in groups:
+        values[index] = model.policy.q_map_values(split.obs[int(states[index[0]])].numpy())[pick].reshape(-1)[
+            cells[index]]
+    return values, groups
 
 
 def greedy_check(data: pathlib.Path, risk: FallRiskModel, checkpoint: str,

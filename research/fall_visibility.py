@@ -161,21 +161,12 @@ def compare(data: pathlib.Path, folder: pathlib.Path, checkpoint: str, out: path
     """Train the camera and the top-down fall model on the same replayed states (see the module docstring) and
     write their report to ``out`` (JSON; with ``models``, each model too, ``<view>.fall_risk.pt``). Both start
     from ``init``'s pick FCN: ``"checkpoint"`` (the default) the checkpoint's, None from scratch."""
-    from sb3_pixeldqn import PixelDoubleDQN
-
     shards, train_index, val_index = chosen_states(data, val_fraction, max_shards, max_states)
     train, val = fall_risk.load_splits(data, val_fraction, max_shards, max_states)
     train_cam, train_top = topdown_split(train, train_index, shards, folder)
     val_cam, val_top = topdown_split(val, val_index, shards, folder)
-    q_model = PixelDoubleDQN.load(checkpoint, device="cpu")
-    pick = [name for name, _ in q_model.policy.maps].index("pick")
-    labels, cells, states = val_cam.label.numpy(), val_cam.cell.numpy(), val_cam.state.numpy()
-    order = np.argsort(states, kind="stable")
-    groups = np.split(order, np.flatnonzero(np.diff(states[order])) + 1) if len(order) else []
-    values = np.zeros(len(labels))
-    for index in groups:
-        values[index] = q_model.policy.q_map_values(val_cam.obs[int(states[index[0]])].numpy())[pick].reshape(-1)[
-            cells[index]]
+    values, groups = fall_risk.pick_values(checkpoint, val_cam)  # the Q-values read from the camera image
+    labels = val_cam.label.numpy()
     report: dict[str, Any] = {
         "checkpoint": checkpoint, "init": checkpoint if init == "checkpoint" else init, "max_shards": max_shards,
         "max_states": max_states, "val_fraction": val_fraction,
