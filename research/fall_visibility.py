@@ -192,9 +192,48 @@ def compare(data: pathlib.Path, folder: pathlib.Path, checkpoint: str, out: path
     return report
 
 
+def neighbour_agreement(split: fall_risk.Split, distances: tuple[int, ...] = (1, 2, 3)) -> dict[str, Any]:
+    """How well a pick's outcome is predicted by the outcome of the nearest other labelled pick of the same object
+    (the same blob of ``ObservationView``) in the same state: per distance ``d`` (cells, Chebyshev), over the
+    labels whose nearest such neighbour is at most ``d`` away, their number and invalid share, the share of
+    (label, nearest neighbour) pairs that differ, and the AUC of the neighbours' mean outcome as a predictor."""
+    from shelf_env.baselines.heuristics import ObservationView
+
+    labels, cells, states = split.label.numpy(), split.cell.numpy(), split.state.numpy()
+    cols = split.obs.shape[-1]
+    nearest = np.full(len(labels), np.inf)
+    predicted = np.full(len(labels), np.nan)
+    differ = np.full(len(labels), np.nan)
+    order = np.argsort(states, kind="stable")
+    for index in np.split(order, np.flatnonzero(np.diff(states[order])) + 1) if len(order) else []:
+        blob = ObservationView.from_observation(split.obs[int(states[index[0]])].numpy(), 0).blob.reshape(-1)
+        r, c, b = cells[index] // cols, cells[index] % cols, blob[cells[index]]
+        dist = np.maximum(np.abs(r[:, None] - r[None]), np.abs(c[:, None] - c[None])).astype(float)
+        dist[(b[:, None] != b[None]) | (b[:, None] < 0)] = np.inf  # another object, or no object
+        np.fill_diagonal(dist, np.inf)
+        near = dist.min(axis=1)
+        for i in np.flatnonzero(np.isfinite(near)):
+            mates = labels[index][dist[i] == near[i]]
+            nearest[index[i]], predicted[index[i]] = near[i], mates.mean()
+            differ[index[i]] = (mates != labels[index[i]]).mean()
+    out: dict[str, Any] = {"labels": len(labels), "states": len(split.obs), "by_distance": {}}
+    for d in distances:
+        sel = nearest <= d
+        out["by_distance"][str(d)] = {
+            "labels": int(sel.sum()), "invalid": float(labels[sel].mean()) if sel.any() else float("nan"),
+            "differ": float(differ[sel].mean()) if sel.any() else float("nan"),
+            "auc": fall_risk.auc(labels[sel], predicted[sel]) if sel.any() else float("nan")}
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m research.fall_visibility", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
+    n = sub.add_parser("neighbours", help="how well the nearest labelled pick of the same object predicts a pick")
+    n.add_argument("--data", type=pathlib.Path, required=True)
+    n.add_argument("--max-shards", default=None)
+    n.add_argument("--val-fraction", type=float, default=0.2)
+    n.add_argument("--out", type=pathlib.Path, required=True, help="the report (JSON)")
     for name, text in (("replay", "the top-down observations of the chosen states (resumable)"),
                        ("compare", "the camera and the top-down fall model on the same states")):
         p = sub.add_parser(name, help=text)
@@ -214,7 +253,12 @@ def main(argv: list[str] | None = None) -> int:
             p.add_argument("--models", type=pathlib.Path, default=None, help="also save both models here")
     args = parser.parse_args(argv)
     try:
-        if args.command == "replay":
+        if args.command == "neighbours":
+            _, val = fall_risk.load_splits(args.data, args.val_fraction, args.max_shards)
+            result = {"max_shards": args.max_shards, "val_fraction": args.val_fraction, **neighbour_agreement(val)}
+            write_json_atomically(args.out, result)
+            print(json.dumps(result))
+        elif args.command == "replay":
             try:
                 part, parts = (int(v) for v in args.part.split("/"))
             except ValueError:

@@ -120,3 +120,28 @@ def test_a_subset_keeps_its_states_labels_in_step():
     assert kept.objects.tolist() == [4, 6] and kept.sorted_change.tolist() == [0, 1, 0]
     other = fv.subset(split, np.array([1, 3]), th.zeros(4, 2, dtype=th.uint8) + 9)
     assert other.obs.tolist() == [[9, 9], [9, 9]] and other.state.tolist() == kept.state.tolist()
+
+
+def test_neighbour_agreement_reads_the_nearest_pick_of_the_same_object():
+    """Two objects (blobs of one class colour) and a cell on none: each pick is predicted by the nearest other
+    labelled pick of its own object (the mean where several are equally near), counted at each distance."""
+    obs = np.full((2, 4, 6, 8), 255, np.uint8)
+    obs[0, :3, 1, 1:5] = np.asarray(CLASS_RGB[0])[:, None]  # object A: row 1, columns 1-4
+    obs[0, :3, 4, 1:3] = np.asarray(CLASS_RGB[0])[:, None]  # object B: row 4, columns 1-2
+    obs[1, :3, 2, 2:5] = np.asarray(CLASS_RGB[2])[:, None]  # the second state's object: row 2, columns 2-4
+    picks = [(0, 1, 1, 1), (0, 1, 2, 1), (0, 1, 4, 0), (0, 4, 1, 0), (0, 4, 2, 0), (0, 5, 7, 1),
+             (1, 2, 2, 1), (1, 2, 3, 0), (1, 2, 4, 0)]
+    state, row, col, label = (np.array(v) for v in zip(*picks))
+    split = fr.Split(th.as_tensor(obs), th.as_tensor(state), th.as_tensor(row * 8 + col),
+                     th.as_tensor(label, dtype=th.float32))
+    got = fv.neighbour_agreement(split)
+    assert got["labels"] == 9 and got["states"] == 2
+    one, two = got["by_distance"]["1"], got["by_distance"]["2"]
+    # within one cell: A's first two (1, 1), B's two (0, 0), and the second state's three: (2, 2) -> 0,
+    # (2, 3) -> the mean of 1 and 0, (2, 4) -> 0
+    assert one["labels"] == 7 and one["invalid"] == pytest.approx(3 / 7)
+    assert one["differ"] == pytest.approx((0 + 0 + 0 + 0 + 1 + 0.5 + 0) / 7)
+    assert one["auc"] == pytest.approx(fr.auc(np.array([1, 1, 0, 0, 1, 0, 0]), np.array([1, 1, 0, 0, 0, 0.5, 0])))
+    # within two: also A's third pick, whose nearest (two cells away) fell while it did not
+    assert two["labels"] == 8 and two["differ"] == pytest.approx((1 + 0.5 + 1) / 8)
+    assert got["by_distance"]["3"]["labels"] == 8  # the pick on no object has no neighbour at any distance

@@ -27,3 +27,6 @@ wait
 #   3. the same from scratch (both models; their start was the camera-trained pick FCN) -> compare_scratch.json
 [ -f "$out/compare_scratch.json" ] || python -m research.fall_visibility compare "${split[@]}" \
     --checkpoint examples/pretrained/p_s.zip --init none --out "$out/compare_scratch.json"
+#   4. how well the nearest labelled pick of the same object predicts a pick (no model) -> neighbours.json
+[ -f "$out/neighbours.json" ] || python -m research.fall_visibility neighbours --data data/teacher \
+    --max-shards s00:55,s01:50,s02:205,s03:54,s04:10 --val-fraction 0.2 --out "$out/neighbours.json"
