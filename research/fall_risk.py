@@ -344,6 +344,39 @@ def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
                  np.concatenate(objects), np.concatenate(dsorted))
 
 
+def spread_labels(split: Split) -> Split:
+    """``split`` with each state's pick labels spread over their objects: every cell of an object (a blob of one
+    class colour, `ObservationView`) that holds a labelled pick takes the outcome of the nearest labelled pick on
+    it (Chebyshev distance in cells; the mean where several are equally near, a soft target). A labelled cell on
+    no object keeps its own label. Why: a pick's outcome is nearly the same anywhere on its object
+    (docs/experiments/fall-visibility.md), so the labels of a few cells stand for the whole object."""
+    labels, cells, states = split.label.numpy(), split.cell.numpy(), split.state.numpy()
+    cols = split.obs.shape[-1]
+    out_state, out_cell, out_label = [], [], []
+    order = np.argsort(states, kind="stable")
+    for index in np.split(order, np.flatnonzero(np.diff(states[order])) + 1) if len(order) else []:
+        t = int(states[index[0]])
+        blob = ObservationView.from_observation(split.obs[t].numpy(), 0).blob.reshape(-1)
+        mine = blob[cells[index]]
+        off = index[mine < 0]  # labelled cells on no object
+        out_state.append(np.full(len(off), t))
+        out_cell.append(cells[off])
+        out_label.append(labels[off])
+        for b in np.unique(mine[mine >= 0]):
+            own = index[mine == b]
+            target = np.flatnonzero(blob == b)
+            dist = np.maximum(np.abs(target[:, None] // cols - cells[own][None] // cols),
+                              np.abs(target[:, None] % cols - cells[own][None] % cols))
+            nearest = dist == dist.min(axis=1, keepdims=True)
+            out_state.append(np.full(len(target), t))
+            out_cell.append(target)
+            out_label.append((nearest * labels[own][None]).sum(axis=1) / nearest.sum(axis=1))
+    return Split(split.obs, th.as_tensor(np.concatenate(out_state) if out_state else np.zeros(0, np.int64)),
+                 th.as_tensor(np.concatenate(out_cell) if out_cell else np.zeros(0, np.int64)),
+                 th.as_tensor(np.concatenate(out_label) if out_label else np.zeros(0), dtype=th.float32),
+                 split.objects, None)
+
+
 def load_splits(data: pathlib.Path, val_fraction: float, max_shards: str | None = None,
                 max_states: int | None = None) -> tuple[Split, Split]:
     """The training and held-out splits of ``data``: a teacher dataset (``sNN_NNNNN.npz`` shards,
@@ -450,27 +483,32 @@ def threshold_report(labels: np.ndarray, p: np.ndarray, threshold: float) -> dic
 def train_fall_risk(data: pathlib.Path, out: pathlib.Path, init: str | None = None, epochs: int = 8,
                     batch: int = 32, lr: float = 3e-4, val_fraction: float = 0.15, seed: int = 0,
                     max_shards: str | None = None, recall: float | None = None,
-                    max_states: int | None = None, coords: bool = False) -> dict[str, Any]:
+                    max_states: int | None = None, coords: bool = False, spread: bool = False) -> dict[str, Any]:
     """Fit a `FallRiskModel` on ``data`` (see the module docstring; `load_splits`: collected episodes,
     or a teacher dataset's pick labels) and save it to ``out``. The held-out split (the last
     ``val_fraction`` of the episodes, or of each series' scenes) chooses the epoch whose weights rank
     its labels best (AUC) and the threshold: the best balanced accuracy, or with ``recall`` the highest
     that flags that share of the held-out falls (`recall_threshold`). The returned report (also the
     file's ``info``) gives their AUC and the recall of falls and of safe picks at the threshold.
-    ``init``: a P+S / S zip whose pick FCN starts the model. ``coords``: `FallRiskModel`'s coordinate channels."""
+    ``init``: a P+S / S zip whose pick FCN starts the model. ``coords``: `FallRiskModel`'s coordinate channels.
+    ``spread``: train on the labels spread over their objects (`spread_labels`; the held-out labels unchanged)."""
     if epochs < 1 or batch < 1 or not 0 < val_fraction < 1:
         raise ValueError(f"need epochs >= 1, batch >= 1 and 0 < val_fraction < 1; got {epochs}, {batch}, "
                          f"{val_fraction}")
     if recall is not None and not 0 < recall <= 1:
         raise ValueError(f"recall must be in (0, 1], got {recall}")
     train, val = load_splits(data, val_fraction, max_shards, max_states)
+    labelled = len(train.label)
+    if spread:
+        train = spread_labels(train)
     model, history, best_epoch = fit_fall_risk(train, val, init, epochs, batch, lr, seed, coords)
     p, labels = scores(model, val), val.label.numpy()
     model.threshold = pick_threshold(labels, p) if recall is None else recall_threshold(labels, p, recall)
     report = {"obs_shape": list(train.obs.shape[1:]), "data": str(data), "max_shards": max_shards,
               "max_states": max_states,
               "val_fraction": val_fraction, "recall_target": recall,
-              "train_states": len(train.obs), "train_probes": len(train.label), "train_invalid": int(train.label.sum()),
+              "train_states": len(train.obs), "train_probes": labelled, "train_targets": len(train.label),
+              "train_invalid": float(train.label.sum()) if spread else int(train.label.sum()), "spread": spread,
               "val_states": len(val.obs), "val_probes": len(labels), "val_invalid": int(labels.sum()),
               "val_auc": auc(labels, p), **threshold_report(labels, p, model.threshold),
               "epochs": epochs, "best_epoch": best_epoch,
@@ -830,6 +868,7 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--max-states", type=int, default=None,
                    help="a teacher dataset's first that many training states only (its held-out scenes unchanged)")
     t.add_argument("--coords", action="store_true", help="add the depth and centre-distance channels")
+    t.add_argument("--spread", action="store_true", help="spread the training labels over their objects")
     t.add_argument("--recall", type=float, default=None,
                    help="threshold: the highest that flags this share of the held-out falls (default: the best "
                         "balanced accuracy)")
@@ -873,7 +912,7 @@ def main(argv: list[str] | None = None) -> int:
             init = None if args.init == "none" else args.init
             report = train_fall_risk(args.data, args.out, init, args.epochs, args.batch, val_fraction=args.val_fraction,
                                      max_shards=args.max_shards, recall=args.recall, max_states=args.max_states,
-                                     coords=args.coords)
+                                     coords=args.coords, spread=args.spread)
             print(json.dumps({k: v for k, v in report.items() if k != "history"}, indent=1))
     except ValueError as err:
         print(f"python -m research.fall_risk {args.command}: {err}", file=sys.stderr)

@@ -77,3 +77,8 @@ for k in 1675 6698; do
         --max-shards "$shards" --max-states "$k" --val-fraction 0.2 --init none --epochs 8 \
         --out "$out/scratch/ff_scratch_$k.fall_risk.pt" | tee "$out/scratch/train_scratch_$k.log"
 done
+# 7. (the fifteenth session, after fall-visibility's neighbour check) the labels spread over their objects, from scratch
+#    -> scratch/ff_spread.fall_risk.pt (its offline check only if its held-out AUC reaches 0.886: the page's rule)
+[ -f "$out/scratch/ff_spread.fall_risk.pt" ] || python -m research.fall_risk train --data data/teacher \
+    --max-shards "$shards" --val-fraction 0.2 --init none --spread --epochs 8 \
+    --out "$out/scratch/ff_spread.fall_risk.pt" | tee "$out/scratch/train_spread.log"
