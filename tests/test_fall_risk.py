@@ -484,3 +484,32 @@ def test_the_penalty_check_and_its_candidate(tmp_path):
     assert fr.main(["penalty", "--data", str(tmp_path / "episodes"), "--model", str(tmp_path / "m.pt"),
                     "--checkpoint", "p.zip", "--out", str(tmp_path / "x.json")]) == 2
     assert not (tmp_path / "x.json").exists()
+
+
+def test_spread_labels_give_each_object_cell_its_nearest_labelled_pick():
+    """One object (row 1, columns 1-5) with a fall labelled at column 1 and a safe pick at column 3: columns 1-2
+    take the fall, 3-5 the safe pick, and none is equidistant except column 2 (one cell from each), which takes
+    their mean; a labelled cell on no object keeps its label; an object with no label gets none."""
+    from shelf_env.camera.heightmap import CLASS_RGB
+
+    obs = np.full((1, 4, 5, 8), 255, np.uint8)
+    obs[0, :3, 1, 1:6] = np.asarray(CLASS_RGB[1])[:, None]
+    obs[0, :3, 3, 6:8] = np.asarray(CLASS_RGB[0])[:, None]  # an object no pick was labelled on
+    split = fr.Split(th.as_tensor(obs), th.tensor([0, 0, 0]), th.tensor([1 * 8 + 1, 1 * 8 + 3, 4 * 8 + 0]),
+                     th.tensor([1.0, 0.0, 1.0]), np.array([2]), np.array([0, 1, 0]))
+    spread = fr.spread_labels(split)
+    got = {int(c): float(v) for c, v in zip(spread.cell, spread.label)}
+    assert got == {9: 1.0, 10: 0.5, 11: 0.0, 12: 0.0, 13: 0.0, 32: 1.0}
+    assert (spread.state == 0).all() and spread.obs is split.obs and spread.sorted_change is None
+
+
+def test_training_with_spread_labels_reports_its_targets(tmp_path):
+    """``--spread`` trains on `spread_labels`'s targets: on the synthetic dataset (no class colour, so no object)
+    they are the labelled picks themselves, and the report says so."""
+    synthetic_teacher_shards(tmp_path / "data")
+    report = fr.train_fall_risk(tmp_path / "data", tmp_path / "s.pt", init=None, epochs=1, batch=8, val_fraction=0.25,
+                                spread=True)
+    assert report["spread"] is True and report["train_targets"] == report["train_probes"] == 54 * 8
+    assert fr.main(["train", "--data", str(tmp_path / "data"), "--out", str(tmp_path / "t.pt"), "--init", "none",
+                    "--epochs", "1", "--val-fraction", "0.25", "--spread"]) == 0
+    assert fr.FallRiskModel.load(tmp_path / "t.pt").info["spread"] is True
