@@ -344,6 +344,12 @@ def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
                  np.concatenate(objects), np.concatenate(dsorted))
 
 
+def state_groups(states: np.ndarray) -> list[np.ndarray]:
+    """Per state index present in ``states`` (in increasing order), the positions of its entries (ascending)."""
+    order = np.argsort(states, kind="stable")
+    return np.split(order, np.flatnonzero(np.diff(states[order])) + 1) if len(order) else []
+
+
 def spread_labels(split: Split) -> Split:
     """``split`` with each state's pick labels spread over their objects: every cell of an object (a blob of one
     class colour, `ObservationView`) that holds a labelled pick takes the outcome of the nearest labelled pick on
@@ -353,8 +359,7 @@ def spread_labels(split: Split) -> Split:
     labels, cells, states = split.label.numpy(), split.cell.numpy(), split.state.numpy()
     cols = split.obs.shape[-1]
     out_state, out_cell, out_label = [], [], []
-    order = np.argsort(states, kind="stable")
-    for index in np.split(order, np.flatnonzero(np.diff(states[order])) + 1) if len(order) else []:
+    for index in state_groups(states):
         t = int(states[index[0]])
         blob = ObservationView.from_observation(split.obs[t].numpy(), 0).blob.reshape(-1)
         mine = blob[cells[index]]
@@ -647,8 +652,7 @@ def pick_values(checkpoint: str, split: Split) -> tuple[np.ndarray, list[np.ndar
     pick = [name for name, _ in model.policy.maps].index("pick")
     cells, states = split.cell.numpy(), split.state.numpy()
     values = np.zeros(len(cells))
-    order = np.argsort(states, kind="stable")
-    groups = np.split(order, np.flatnonzero(np.diff(states[order])) + 1) if len(order) else []
+    groups = state_groups(states)
     for index in groups:
         values[index] = model.policy.q_map_values(split.obs[int(states[index[0]])].numpy())[pick].reshape(-1)[
             cells[index]]

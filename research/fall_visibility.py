@@ -204,8 +204,7 @@ def neighbour_agreement(split: fall_risk.Split, distances: tuple[int, ...] = (1,
     nearest = np.full(len(labels), np.inf)
     predicted = np.full(len(labels), np.nan)
     differ = np.full(len(labels), np.nan)
-    order = np.argsort(states, kind="stable")
-    for index in np.split(order, np.flatnonzero(np.diff(states[order])) + 1) if len(order) else []:
+    for index in fall_risk.state_groups(states):
         blob = ObservationView.from_observation(split.obs[int(states[index[0]])].numpy(), 0).blob.reshape(-1)
         r, c, b = cells[index] // cols, cells[index] % cols, blob[cells[index]]
         dist = np.maximum(np.abs(r[:, None] - r[None]), np.abs(c[:, None] - c[None])).astype(float)
