@@ -539,6 +539,11 @@ def fit_fall_risk(train: Split, val: Split, init: str | None = None, epochs: int
     optimizer = th.optim.Adam(model.parameters(), lr=lr, weight_decay=2e-5)
     rng = np.random.default_rng(seed)
     states = np.arange(len(train.obs))
+    label_state = train.state.numpy()
+    of_state = [np.zeros(0, np.int64)] * len(states)  # each state's label positions, found once, not per batch
+    for index in state_groups(label_state):
+        of_state[int(label_state[index[0]])] = index
+    in_chunk = np.full(len(states), -1, np.int64)
     permute = PermuteClasses()
     history: list[dict[str, float]] = []
     best: tuple[float, int, dict[str, th.Tensor]] = (-1.0, epochs, {})
@@ -546,11 +551,11 @@ def fit_fall_risk(train: Split, val: Split, init: str | None = None, epochs: int
         model.train()
         losses = []
         for chunk in np.array_split(rng.permutation(states), max(1, len(states) // batch)):
-            sel = th.as_tensor(np.isin(train.state.numpy(), chunk))
-            if not sel.any():
+            sel = th.as_tensor(np.sort(np.concatenate([of_state[s] for s in chunk])))  # the chunk's labels, in order
+            if not len(sel):
                 continue
-            local = {int(s): i for i, s in enumerate(chunk)}
-            idx = th.as_tensor([local[int(s)] for s in train.state[sel]])
+            in_chunk[chunk] = np.arange(len(chunk))
+            idx = th.as_tensor(in_chunk[label_state[sel.numpy()]])
             images = train.obs[th.as_tensor(chunk)]
             perm = rng.permutation(3)
             if (perm != np.arange(3)).any():  # falls do not depend on a class: rename the classes
