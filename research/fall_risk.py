@@ -64,7 +64,7 @@ import torch.nn.functional as F
 
 from sb3_pixeldqn.networks import DEFAULT_WIDTHS, ResidualFCN
 from shelf_env import params, policies
-from shelf_env.baselines.heuristics import ObservationView
+from shelf_env.baselines.heuristics import ObservationView, object_blobs
 from shelf_env.files import write_atomically, write_json_atomically
 from shelf_env.privileged.lookahead import LookaheadDistance, probe_outcome
 from shelf_env.symmetry import PermuteClasses
@@ -352,7 +352,7 @@ def state_groups(states: np.ndarray) -> list[np.ndarray]:
 
 def spread_labels(split: Split) -> Split:
     """``split`` with each state's pick labels spread over their objects: every cell of an object (a blob of one
-    class colour, `ObservationView`) that holds a labelled pick takes the outcome of the nearest labelled pick on
+    class colour, `object_blobs`) that holds a labelled pick takes the outcome of the nearest labelled pick on
     it (Chebyshev distance in cells; the mean where several are equally near, a soft target). A labelled cell on
     no object keeps its own label. Why: a pick's outcome is nearly the same anywhere on its object
     (docs/experiments/fall-visibility.md), so the labels of a few cells stand for the whole object."""
@@ -361,7 +361,7 @@ def spread_labels(split: Split) -> Split:
     out_state, out_cell, out_label = [], [], []
     for index in state_groups(states):
         t = int(states[index[0]])
-        blob = ObservationView.from_observation(split.obs[t].numpy(), 0).blob.reshape(-1)
+        blob = object_blobs(split.obs[t].numpy()).reshape(-1)
         mine = blob[cells[index]]
         off = index[mine < 0]  # labelled cells on no object
         out_state.append(np.full(len(off), t))
@@ -588,14 +588,14 @@ PENALTIES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
 
 def object_pooled(risk: np.ndarray, obs: np.ndarray, pooling: str) -> np.ndarray:
     """``risk`` (H, W) with every object cell set to the mean (``"mean"``) or maximum (``"max"``) risk of
-    its object: the blob of one class colour it belongs to in ``obs`` (`ObservationView`; touching objects of
+    its object: the blob of one class colour it belongs to in ``obs`` (`object_blobs`; touching objects of
     one class are one blob). Cells on no object keep their own risk; ``"cell"`` returns ``risk`` unchanged.
     Why: most falls belong to the object a pick lifts, not to the cell it lifts it by."""
     if pooling not in POOLINGS:
         raise ValueError(f"pooling must be one of {POOLINGS}, got {pooling!r}")
     if pooling == "cell":
         return risk
-    blob = ObservationView.from_observation(obs, 0).blob
+    blob = object_blobs(obs)
     on = blob >= 0
     if not on.any():
         return risk
@@ -610,15 +610,17 @@ def object_pooled(risk: np.ndarray, obs: np.ndarray, pooling: str) -> np.ndarray
     return out
 
 
-def choose(groups: list[np.ndarray], values: np.ndarray, risk: np.ndarray, threshold: float | None = None,
-           penalty: float | None = None) -> np.ndarray:
+def choose(groups: list[np.ndarray], values: np.ndarray, risk: np.ndarray | None = None,
+           threshold: float | None = None, penalty: float | None = None) -> np.ndarray:
     """Per state (``groups``: the indices of its labels), the label a choice lands on: the highest value
     among the labels at risk below ``threshold`` (all of them where none is), or the highest
-    ``values - penalty * risk``. Neither: the highest value."""
+    ``values - penalty * risk``. No risk, or neither: the highest value."""
     out = np.empty(len(groups), np.int64)
     for k, index in enumerate(groups):
         q = values[index]
-        if penalty is not None:
+        if risk is None:
+            pass
+        elif penalty is not None:
             q = q - penalty * risk[index]
         elif threshold is not None:
             kept = risk[index] < threshold
@@ -736,7 +738,7 @@ def penalty_report(labels: np.ndarray, dsorted: np.ndarray, values: np.ndarray, 
 
     sigma = float(values.std())
     out: dict[str, Any] = {"val_states": len(groups), "labels": len(labels), "q_sigma": sigma,
-                           "max_invalid": max_invalid, "unfiltered": outcome(choose(groups, values, labels)),
+                           "max_invalid": max_invalid, "unfiltered": outcome(choose(groups, values)),
                            "oracle": outcome(choose(groups, values, labels, threshold=0.5)), "poolings": {}}
     for how, r in scored.items():
         out["poolings"][how] = {

@@ -27,11 +27,11 @@ import sys
 import time
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch as th
 
 from research import fall_risk
+from shelf_env.baselines.heuristics import object_blobs
 from shelf_env.files import write_atomically, write_json_atomically
 from shelf_env.privileged import dataset
 from shelf_env.privileged.topdown import topdown_observation
@@ -45,6 +45,8 @@ def chosen_states(data: pathlib.Path, val_fraction: float, max_shards: str | Non
 
     shards = select_shards(dataset.load_dataset(data), max_shards)
     train, val = split_by_scene(shards, val_fraction)
+    if not val:
+        raise ValueError(f"{data}: {len(shards)} shards leave no held-out scene at val_fraction {val_fraction}")
     return shards, np.array(train[:max_states] if max_states is not None else train), np.array(val)
 
 
@@ -52,10 +54,7 @@ def replay_shard(shard: dataset.Shard, wanted: np.ndarray) -> dict[str, np.ndarr
     """Replay the scenes of ``shard`` that hold a state of ``wanted`` (indices within the shard) and, at each,
     read the top-down observation and whether the camera's equals the stored one. One env step per state:
     each scene is replayed once, forward."""
-    layout = shard.meta["layout"]
-    primitives = ("pick", "push") if "push_left" in layout["map_names"] else ("pick",)
-    env = gym.make("ShelfSort-v0", num_objects=1, object_set=shard.meta["object_set"], primitives=primitives,
-                   pixel_size=layout["pixel_size"])
+    env = dataset.replay_env(shard)
     a = shard.arrays
     top = np.zeros((len(wanted), *a["obs"].shape[1:]), np.uint8)
     match = np.zeros(len(wanted), bool)
@@ -162,7 +161,7 @@ def compare(data: pathlib.Path, folder: pathlib.Path, checkpoint: str, out: path
     write their report to ``out`` (JSON; with ``models``, each model too, ``<view>.fall_risk.pt``). Both start
     from ``init``'s pick FCN: ``"checkpoint"`` (the default) the checkpoint's, None from scratch."""
     shards, train_index, val_index = chosen_states(data, val_fraction, max_shards, max_states)
-    train, val = fall_risk.load_splits(data, val_fraction, max_shards, max_states)
+    train, val = fall_risk.teacher_split(shards, train_index), fall_risk.teacher_split(shards, val_index)
     train_cam, train_top = topdown_split(train, train_index, shards, folder)
     val_cam, val_top = topdown_split(val, val_index, shards, folder)
     values, groups = fall_risk.pick_values(checkpoint, val_cam)  # the Q-values read from the camera image
@@ -194,18 +193,16 @@ def compare(data: pathlib.Path, folder: pathlib.Path, checkpoint: str, out: path
 
 def neighbour_agreement(split: fall_risk.Split, distances: tuple[int, ...] = (1, 2, 3)) -> dict[str, Any]:
     """How well a pick's outcome is predicted by the outcome of the nearest other labelled pick of the same object
-    (the same blob of ``ObservationView``) in the same state: per distance ``d`` (cells, Chebyshev), over the
+    (the same blob, `object_blobs`) in the same state: per distance ``d`` (cells, Chebyshev), over the
     labels whose nearest such neighbour is at most ``d`` away, their number and invalid share, the share of
     (label, nearest neighbour) pairs that differ, and the AUC of the neighbours' mean outcome as a predictor."""
-    from shelf_env.baselines.heuristics import ObservationView
-
     labels, cells, states = split.label.numpy(), split.cell.numpy(), split.state.numpy()
     cols = split.obs.shape[-1]
     nearest = np.full(len(labels), np.inf)
     predicted = np.full(len(labels), np.nan)
     differ = np.full(len(labels), np.nan)
     for index in fall_risk.state_groups(states):
-        blob = ObservationView.from_observation(split.obs[int(states[index[0]])].numpy(), 0).blob.reshape(-1)
+        blob = object_blobs(split.obs[int(states[index[0]])].numpy()).reshape(-1)
         r, c, b = cells[index] // cols, cells[index] % cols, blob[cells[index]]
         dist = np.maximum(np.abs(r[:, None] - r[None]), np.abs(c[:, None] - c[None])).astype(float)
         dist[(b[:, None] != b[None]) | (b[:, None] < 0)] = np.inf  # another object, or no object

@@ -53,6 +53,21 @@ from shelf_env.robot.placement import _window_sum
 CUP_MARGIN_M = 0.013
 
 
+def object_classes(obs: np.ndarray) -> np.ndarray:
+    """(H, W) int: the class of each visible object cell of ``obs`` (its class colour), -1 elsewhere."""
+    rgb = np.moveaxis(obs[:3], 0, -1)
+    object_class = np.full(obs.shape[1:], -1, dtype=np.int64)
+    for k, colour in enumerate(CLASS_RGB):
+        object_class[(rgb == colour).all(axis=-1)] = k
+    return object_class
+
+
+def object_blobs(obs: np.ndarray) -> np.ndarray:
+    """(H, W) int: `ObservationView`'s ``blob`` alone (the visible objects as connected blobs of one class
+    colour, numbered from 0; -1 elsewhere), without the view's regions and graspable cells."""
+    return label_blobs(object_classes(obs))
+
+
 @dataclass
 class ObservationView:
     """What a heuristic reads from one observation ``(4, H, W)``."""
@@ -66,9 +81,7 @@ class ObservationView:
     @classmethod
     def from_observation(cls, obs: np.ndarray, margin_cells: int) -> ObservationView:
         rgb = np.moveaxis(obs[:3], 0, -1)
-        object_class = np.full(obs.shape[1:], -1, dtype=np.int64)
-        for k, colour in enumerate(CLASS_RGB):
-            object_class[(rgb == colour).all(axis=-1)] = k
+        object_class = object_classes(obs)
         regions: list[tuple[int, int, int, int] | None] = []
         for colour in REGION_RGB:
             rows, cols = np.nonzero((rgb == colour).all(axis=-1))

@@ -279,15 +279,21 @@ def load_dataset(folder: pathlib.Path, expect_layout: dict[str, Any] | None = No
     return [load_shard(f, expect_layout) for f in files]
 
 
+def replay_env(shard: Shard) -> gym.Env:
+    """A ``ShelfSort-v0`` with the shard's object set, primitives and cell size, to replay its scenes in
+    (``set_num_objects`` and ``reset(seed=...)`` per episode, then its executed actions)."""
+    layout_ = shard.meta["layout"]
+    primitives = ("pick", "push") if "push_left" in layout_["map_names"] else ("pick",)
+    return gym.make("ShelfSort-v0", num_objects=1, object_set=shard.meta["object_set"], primitives=primitives,
+                    pixel_size=layout_["pixel_size"])
+
+
 def replay_states(shard: Shard, max_labels: int | None = None) -> tuple[int, int, list[str]]:
     """Replay a shard on this machine and check it: every state's observation against (reset seed,
     executed actions) and every label (up to ``max_labels``) against a real ``env.step`` of its action
     from that state. Returns ``(states checked, labels checked, mismatches)``; bit-identical only on the
     machine (and library build) that collected the shard."""
-    layout_ = shard.meta["layout"]
-    primitives = ("pick", "push") if "push_left" in layout_["map_names"] else ("pick",)
-    env = gym.make("ShelfSort-v0", num_objects=1, object_set=shard.meta["object_set"], primitives=primitives,
-                   pixel_size=layout_["pixel_size"])
+    env = replay_env(shard)
     a = shard.arrays
     mismatches: list[str] = []
     checked = 0
