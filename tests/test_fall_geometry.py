@@ -1,0 +1,162 @@
+"""Named fall geometry (research.fall_geometry): each feature as the crafted scene's geometry says, and the
+command line from a teacher dataset to the report that learns a corridor rule."""
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from research import fall_geometry as fg
+from research import fall_risk as fr
+from sb3_pixeldqn import PixelDoubleDQN
+from shelf_env import params
+from shelf_env.camera.heightmap import CLASS_RGB, OCCLUDED_RGB, REGION_RGB, observed_height
+from shelf_env.conditions.safe_picks import Z_CARRY
+
+
+def paint(obs, rows, cols, rgb, height=None):
+    obs[:3, rows, cols] = np.asarray(rgb, np.uint8)[:, None, None]
+    if height is not None:
+        obs[3, rows, cols] = int(round(height / params.CABINET_HEIGHT * 255))
+
+
+def crafted():
+    """40 x 60 cells (1 cm): class 0's region at the front left; object A (class 0, 10 cm tall) at the back with
+    grey cells behind it, object B (class 1, 12 cm) in front of it, overlapping its columns."""
+    obs = np.full((4, 40, 60), 255, np.uint8)
+    obs[3] = 0
+    paint(obs, slice(30, 40), slice(0, 20), REGION_RGB[0])
+    paint(obs, slice(5, 10), slice(10, 15), CLASS_RGB[0], 0.10)
+    paint(obs, slice(20, 23), slice(12, 17), CLASS_RGB[1], 0.12)
+    paint(obs, slice(0, 5), slice(10, 15), OCCLUDED_RGB)
+    return obs
+
+
+def test_each_feature_is_the_crafted_scene_s_geometry():
+    obs = crafted()
+    height = observed_height(obs)
+    a, b = height[7, 12], height[21, 14]
+    cells = np.array([7 * 60 + 12, 21 * 60 + 14, 35 * 60 + 50, 5 * 60 + 10])
+    x = fg.geometry_features(obs, cells)
+    assert x.shape == (4, len(fg.FEATURES)) and x.dtype == np.float32
+    f = [dict(zip(fg.FEATURES, row)) for row in x.astype(float)]
+    first = f[0]
+    assert first["on_object"] == 1 and first["cell_height"] == pytest.approx(a)
+    assert first["object_area"] == 25 and first["object_rows"] == 5 and first["object_cols"] == 5
+    assert first["object_back_row"] == 5 and first["object_front_row"] == 30 and first["wall_distance"] == 10
+    assert first["offset_rows"] == 0 and first["offset_cols"] == 0 and first["edge_distance"] == 3
+    # B stands in A's corridor to the opening: 3 rows x its 3 columns that A's columns cover
+    assert first["corridor_cells"] == 9
+    for name in ("carry_margin_05", "carry_margin_15", "carry_margin_30"):
+        assert first[name] == pytest.approx(Z_CARRY - a - b, abs=1e-6)
+    assert first["nearest_other"] == 11 and first["tallest_near"] == 0  # B is 11 cells away, beyond 3 cm
+    assert first["grey_behind"] == 25 and first["grey_near"] == 5  # the grey row next to A's back edge
+    assert first["in_region"] == 0 and first["region_free"] == 1 and first["region_tallest"] == 0
+    assert first["scene_objects"] == 2 and first["scene_grey"] == pytest.approx(25 / 2400)
+    second = f[1]  # B: nothing in front of it, no region of its class on the map
+    assert second["corridor_cells"] == 0 and second["carry_margin_05"] == pytest.approx(Z_CARRY - b, abs=1e-6)
+    assert second["object_front_row"] == 17 and second["region_free"] == 0
+    assert second["grey_behind"] == 15  # the grey cells behind A that lie in B's columns too
+    assert second["offset_cols"] == pytest.approx(0) and second["edge_distance"] == 2  # B is 3 rows deep
+    off = f[2]  # on no object: its height and the scene only
+    assert off["on_object"] == 0 and off["object_area"] == 0 and off["carry_margin_05"] == 0
+    assert off["scene_objects"] == 2
+    corner = f[3]  # A's back left corner: on the edge, behind and left of the centre
+    assert corner["edge_distance"] == 1 and corner["offset_rows"] == pytest.approx(-2 / 5)
+    assert corner["offset_cols"] == pytest.approx(2 / 5)
+    # B moved into A's region: A is no longer in front of anything, and the region is less free
+    moved = obs.copy()
+    paint(moved, slice(20, 23), slice(12, 17), (255, 255, 255), 0.0)
+    paint(moved, slice(32, 35), slice(2, 5), CLASS_RGB[1], 0.12)
+    y = dict(zip(fg.FEATURES, fg.geometry_features(moved, cells[:1])[0].astype(float)))
+    assert y["corridor_cells"] == 0 and y["region_free"] == pytest.approx(191 / 200)
+    assert y["region_tallest"] == pytest.approx(b)
+    mirrored = fg.geometry_features(obs[:, :, ::-1].copy(), np.array([7 * 60 + 59 - 12]))
+    assert np.allclose(mirrored, x[:1])  # the features are symmetric under the left-right mirror
+    with pytest.raises(ValueError, match="one \\(4, H, W\\) observation"):
+        fg.geometry_features(obs[:3], cells)
+    with pytest.raises(ValueError, match="cells must lie in"):
+        fg.geometry_features(obs, np.array([2400]))
+
+
+def corridor_shards(folder, shards=2, episodes=8, states=5, seed=0):
+    """A teacher dataset of 20 x 30 cells (2 cm) whose picks fall exactly when a taller-than-clearance object
+    stands in front of the picked one in its columns (the carry account of `shelf_env.conditions.safe_picks`)."""
+    from shelf_env.privileged import dataset
+
+    rng = np.random.default_rng(seed)
+    folder.mkdir(parents=True)
+    rows, cols = 20, 30
+    centres = [(r, c) for r in range(2, 18, 4) for c in range(3, 28, 5)]
+    layout = {"obs_shape": [4, rows, cols], "pixel_size": 0.02, "map_names": ["pick", "push_left", "push_right"]}
+    for k in range(shards):
+        eps = []
+        for _ in range(episodes):
+            ep = dataset.Episode()
+            for t in range(states):
+                obs = np.full((4, rows, cols), 255, np.uint8)
+                obs[3] = 0
+                chosen = [centres[i] for i in rng.permutation(len(centres))[:7]]
+                tall = {rc: float(rng.choice([0.04, 0.10, 0.14])) for rc in chosen}
+                for (r, c), h in tall.items():
+                    paint(obs, slice(r - 1, r + 2), slice(c - 1, c + 2), CLASS_RGB[int(rng.integers(3))], h)
+                for (r, c), h in tall.items():
+                    blocked = any(c2 == c and r2 > r and h + h2 > Z_CARRY for (r2, c2), h2 in tall.items())
+                    for key, v in zip(dataset.LABEL_KEYS, (t, r * cols + c, not blocked, blocked, False,
+                                                           int(not blocked), 2)):
+                        ep.labels[key].append(v)
+                ep.obs.append(obs)
+                for key, v in zip(dataset.EPISODE_STATE_KEYS, (t, 0, np.nan, 0)):
+                    ep.states[key].append(v)
+            eps.append(ep)
+        meta = {"format": dataset.FORMAT, "dynamics_version": dataset.DYNAMICS_VERSION, "layout": layout,
+                "series": 0, "shard": k, "episodes": [{"num_objects": 7} for _ in range(episodes)]}
+        dataset.save_shard(folder / f"s00_{k:05d}.npz", meta, eps, layout["obs_shape"])
+
+
+def test_the_command_line_learns_a_corridor_rule_and_joins_the_fall_model(tmp_path, capsys):
+    data = tmp_path / "data"
+    corridor_shards(data)
+    args = ["--data", str(data), "--val-fraction", "0.25"]
+    assert fg.main(["fit", *args, "--features", str(tmp_path / "none.npz"), "--out", str(tmp_path / "r.json")]) == 2
+    assert "make it with `features`" in capsys.readouterr().err and not (tmp_path / "r.json").exists()
+    assert fg.main(["features", *args, "--out", str(tmp_path / "f.npz")]) == 0
+    built = json.loads(capsys.readouterr().out)
+    train, val = fr.load_splits(data, 0.25)
+    assert built["train_labels"] == len(train.label) and built["val_labels"] == len(val.label)
+    with np.load(tmp_path / "f.npz") as z:
+        assert np.array_equal(z["val_y"], val.label.numpy()) and z["train_x"].shape == (len(train.label), 26)
+        assert len(np.unique(z["val_scene"])) == 4  # the last 4 of 16 scenes, held out
+    fall_model = tmp_path / "fm.pt"
+    fr.FallRiskModel(4, (4, 8, 8)).save(fall_model)  # an untrained fall model: the features carry the rule
+    env = gym.make("ShelfSort-v0", pixel_size=0.02)
+    PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0), ("push", 0), ("push", 180)],
+                                                        widths=(4, 8, 8)), seed=0).save(tmp_path / "p.zip")
+    env.close()
+    out = tmp_path / "r.json"
+    assert fg.main(["fit", *args, "--features", str(tmp_path / "f.npz"), "--fall-model", str(fall_model),
+                    "--epochs", "40", "--checkpoint", str(tmp_path / "p.zip"), "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert report["mlp"]["val_auc"] > 0.95 and report["reading"] == "features"
+    assert len(report["mlp"]["history"]) == 40 and report["mlp"]["val_auc"] == max(report["mlp"]["history"])
+    margin = report["features"]["carry_margin_05"]
+    assert margin["sign"] == -1 and margin["val_auc"] > 0.95  # a smaller margin is riskier
+    assert report["twofold"]["scenes"] == 4 and report["twofold"]["joint"] > 0.9
+    assert report["twofold"]["fcn"] == pytest.approx(fr.auc(val.label.numpy(), fr.scores(
+        fr.FallRiskModel.load(fall_model), val)))
+    offline = report["offline"]
+    assert set(offline["poolings"]) == {"mlp", "joint"} and offline["labels"] == len(val.label)
+    assert offline["oracle"]["invalid"] <= offline["poolings"]["mlp"]["hard"][0]["invalid"] + 1e-9
+    assert out.with_suffix(".models.pt").is_file()
+
+
+def test_the_reading_and_the_two_fold_split():
+    assert fg.reading({"mlp": {"val_auc": 0.9}, "twofold": {"joint": 0.5}}) == "features"
+    assert fg.reading({"mlp": {"val_auc": 0.8}, "twofold": {"joint": 0.89}}) == "joint"
+    assert fg.reading({"mlp": {"val_auc": 0.8}, "twofold": {"joint": 0.88}}) == "neither"
+    assert fg.reading({"mlp": {"val_auc": 0.8}}) == "neither"
+    folds = fg.scene_folds(np.array([7, 7, 3, 9, 3, 12]))
+    assert folds.tolist() == [1, 1, 0, 0, 0, 1]  # scenes 3, 7, 9, 12 alternate; a scene stays in one fold
+    with pytest.raises(ValueError, match="two scenes"):
+        fg.twofold(np.zeros((4, 2)), np.array([0, 1, 0, 1.0]), np.array([5, 5, 5, 5]))
