@@ -55,6 +55,19 @@ FEATURES = (
     "scene_objects",  # visible objects
     "scene_grey",  # share of the map's cells that are occluded
 )
+#: Round two (``blockers=True``, appended): the *blockers* of a picked object, the other objects with cells in its
+#: straight corridor to the opening (its columns, from its back row) whose top is above the carried object's bottom
+#: (``Z_CARRY`` - its highest cell), and the front-most of them (zeros where none).
+BLOCKER_FEATURES = (
+    "blockers",  # how many
+    "blocker_gap",  # rows from the object's front row to the nearest blocker cell in the corridor (0: overlapping)
+    "blocker_to_opening",  # the front-most blocker's distance to the opening (rows)
+    "blocker_rows", "blocker_cols", "blocker_area",  # the front-most blocker's extent and area
+    "blocker_in_corridor",  # share of the front-most blocker's columns inside the corridor
+    "blockers_area",  # all blockers' area
+    "blocker_stopped",  # another object stands between the front-most blocker and the opening, in its columns
+    "carry_bottom",  # Z_CARRY - the object's highest cell: the carried object's bottom
+)
 #: Widths (metres) the carry corridor is widened by on each side, for ``carry_margin_*``.
 CORRIDOR_SIDES = (0.005, 0.015, 0.03)
 NEAR_M, GREY_NEAR_M, EDGE_CAP = 0.03, 0.01, 10
@@ -72,10 +85,47 @@ def _tallest_in(height: np.ndarray, where: np.ndarray) -> float:
     return float(height[where].max(initial=0.0))
 
 
-def geometry_features(obs: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """(K, len(FEATURES)) float32: the features of the picks at flat cells ``cells`` of one observation
-    ``obs`` (4, H, W). A pick on no object gets ``on_object`` 0, its cell's height and the scene's
-    features, and zeros elsewhere."""
+def feature_names(blockers: bool = False) -> tuple[str, ...]:
+    """The columns of `geometry_features`: round one's, and with ``blockers`` round two's after them."""
+    return FEATURES + BLOCKER_FEATURES if blockers else FEATURES
+
+
+def blocker_features(blob: np.ndarray, height: np.ndarray, b: int) -> dict[str, float]:
+    """`BLOCKER_FEATURES` of the object ``b`` (a blob of ``blob``), from the blobs and observed heights."""
+    rows = blob.shape[0]
+    own = blob == b
+    rr, cc = np.nonzero(own)
+    r0, r1, c0, c1 = int(rr.min()), int(rr.max()), int(cc.min()), int(cc.max())
+    bottom = Z_CARRY - float(height[own].max())
+    corridor = np.zeros_like(own)
+    corridor[r0:, c0:c1 + 1] = True
+    hit = corridor & (blob >= 0) & ~own & (height > bottom)
+    out = dict.fromkeys(BLOCKER_FEATURES, 0.0)
+    out["carry_bottom"] = bottom
+    ids = np.unique(blob[hit])
+    if not len(ids):
+        return out
+    hit_rows = np.nonzero(hit)[0]
+    fronts = {int(k): int(np.nonzero(blob == k)[0].max()) for k in ids}
+    front = max(fronts, key=lambda k: fronts[k])
+    fr_rows, fr_cols = np.nonzero(blob == front)
+    cols = np.unique(fr_cols)
+    ahead = np.zeros_like(own)
+    ahead[fronts[front] + 1:, cols] = True
+    out.update({
+        "blockers": float(len(ids)), "blocker_gap": float(max(int(hit_rows.min()) - r1 - 1, 0)),
+        "blocker_to_opening": float(rows - 1 - fronts[front]),
+        "blocker_rows": float(fr_rows.max() - fr_rows.min() + 1), "blocker_cols": float(cols.max() - cols.min() + 1),
+        "blocker_area": float(len(fr_rows)), "blocker_in_corridor": float(((cols >= c0) & (cols <= c1)).mean()),
+        "blockers_area": float(np.isin(blob, ids).sum()),
+        "blocker_stopped": float((ahead & (blob >= 0) & (blob != front) & ~own).any())})
+    return out
+
+
+def geometry_features(obs: np.ndarray, cells: np.ndarray, blockers: bool = False) -> np.ndarray:
+    """(K, len(feature_names(blockers))) float32: the features of the picks at flat cells ``cells`` of one
+    observation ``obs`` (4, H, W). A pick on no object gets ``on_object`` 0, its cell's height and the
+    scene's features, and zeros elsewhere."""
     obs = np.asarray(obs)
     if obs.ndim != 3 or obs.shape[0] != 4:
         raise ValueError(f"need one (4, H, W) observation, got shape {obs.shape}")
@@ -96,9 +146,10 @@ def geometry_features(obs: np.ndarray, cells: np.ndarray) -> np.ndarray:
         rr, cc = np.nonzero((rgb == colour).all(axis=-1))
         regions.append((rr.min(), rr.max(), cc.min(), cc.max()) if rr.size else None)
     scene = (float(blob.max() + 1), float(grey.mean()))
-    out = np.zeros((len(cells), len(FEATURES)), np.float32)
+    names = feature_names(blockers)
+    out = np.zeros((len(cells), len(names)), np.float32)
     out[:, FEATURES.index("cell_height")] = height.reshape(-1)[cells]
-    out[:, -2:] = scene
+    out[:, FEATURES.index("scene_objects")], out[:, FEATURES.index("scene_grey")] = scene
     own_of = blob.reshape(-1)[cells]
     for b in np.unique(own_of[own_of >= 0]):
         own = blob == b
@@ -140,8 +191,10 @@ def geometry_features(obs: np.ndarray, cells: np.ndarray) -> np.ndarray:
             "tallest_near": _tallest_in(height, grown & others), "grey_near": float((halo & grey).sum()),
             "grey_behind": float((behind & grey).sum()), "in_region": in_region, "region_free": free,
             "region_tallest": region_tallest}
+        if blockers:
+            per_object |= blocker_features(blob, height, int(b))
         for name, value in per_object.items():
-            out[mine, FEATURES.index(name)] = value
+            out[mine, names.index(name)] = value
         out[mine, FEATURES.index("offset_rows")] = (r - rr.mean()) / (r1 - r0 + 1)
         out[mine, FEATURES.index("offset_cols")] = np.abs(c - cc.mean()) / (c1 - c0 + 1)
         out[mine, FEATURES.index("edge_distance")] = np.minimum(edge[r, c], EDGE_CAP)
@@ -150,18 +203,18 @@ def geometry_features(obs: np.ndarray, cells: np.ndarray) -> np.ndarray:
     return out
 
 
-def split_features(split: fall_risk.Split) -> np.ndarray:
+def split_features(split: fall_risk.Split, blockers: bool = False) -> np.ndarray:
     """`geometry_features` of every label of ``split``, in the split's label order."""
-    out = np.zeros((len(split.label), len(FEATURES)), np.float32)
+    out = np.zeros((len(split.label), len(feature_names(blockers))), np.float32)
     cells, states = split.cell.numpy(), split.state.numpy()
     for index in fall_risk.state_groups(states):
-        out[index] = geometry_features(split.obs[int(states[index[0]])].numpy(), cells[index])
+        out[index] = geometry_features(split.obs[int(states[index[0]])].numpy(), cells[index], blockers)
     return out
 
 
 def held_out_scenes(data: pathlib.Path, val_fraction: float, max_shards: str | None) -> np.ndarray:
     """Per held-out state of `research.fall_risk.load_splits`'s split (in its order), a scene number: the
-    two-fold split of `joint_twofold` keeps each scene's states together."""
+    two-fold split of `twofold` keeps each scene's states together."""
     from shelf_env.privileged import dataset
     from shelf_env.training.distill import select_shards, split_by_scene
 
@@ -172,21 +225,41 @@ def held_out_scenes(data: pathlib.Path, val_fraction: float, max_shards: str | N
     return scene[np.array(val)]
 
 
-def build(data: pathlib.Path, out: pathlib.Path, val_fraction: float, max_shards: str | None) -> dict[str, Any]:
-    """The features of the fall model's split, saved atomically to ``out`` (``.npz``)."""
+def fresh_split(data: pathlib.Path, used: str | None, fresh: str) -> fall_risk.Split:
+    """The pick labels of every state of the shards ``fresh`` selects (`select_shards`' spec) that ``used``
+    (the fall model's ``--max-shards``) does not: a test set no fall model trained on."""
+    from shelf_env.privileged import dataset
+    from shelf_env.training.distill import select_shards
+
+    shards = dataset.load_dataset(data)
+    taken = {s.path.name for s in select_shards(shards, used)}
+    chosen = [s for s in select_shards(shards, fresh) if s.path.name not in taken]
+    if not chosen:
+        raise ValueError(f"--fresh {fresh} selects no shard that --max-shards {used} leaves out")
+    return fall_risk.teacher_split(chosen, np.arange(sum(s.num_states for s in chosen)))
+
+
+def build(data: pathlib.Path, out: pathlib.Path, val_fraction: float, max_shards: str | None,
+          blockers: bool = False, fresh: str | None = None) -> dict[str, Any]:
+    """The features of the fall model's split (and with ``fresh`` of `fresh_split`'s test set), saved
+    atomically to ``out`` (``.npz``)."""
     train, val = fall_risk.load_splits(data, val_fraction, max_shards)
-    arrays = {"train_x": split_features(train), "train_y": train.label.numpy().astype(np.int8),
-              "val_x": split_features(val), "val_y": val.label.numpy().astype(np.int8),
+    arrays = {"train_x": split_features(train, blockers), "train_y": train.label.numpy().astype(np.int8),
+              "val_x": split_features(val, blockers), "val_y": val.label.numpy().astype(np.int8),
               "val_state": val.state.numpy(), "val_scene": held_out_scenes(data, val_fraction, max_shards)[
-                  val.state.numpy()], "names": np.array(FEATURES)}
+                  val.state.numpy()], "names": np.array(feature_names(blockers))}
+    if fresh is not None:
+        test = fresh_split(data, max_shards, fresh)
+        arrays |= {"test_x": split_features(test, blockers), "test_y": test.label.numpy().astype(np.int8)}
 
     def save(path: pathlib.Path) -> None:
         with open(path, "wb") as f:
             np.savez_compressed(f, **arrays)
 
     write_atomically(out, save)
-    return {"train_labels": len(arrays["train_y"]), "val_labels": len(arrays["val_y"]),
-            "train_invalid": float(arrays["train_y"].mean()), "val_invalid": float(arrays["val_y"].mean())}
+    counts = {f"{k}_labels": len(arrays[f"{k}_y"]) for k in ("train", "val", "test") if f"{k}_y" in arrays}
+    return counts | {f"{k}_invalid": float(arrays[f"{k}_y"].mean()) for k in ("train", "val", "test")
+                     if f"{k}_y" in arrays}
 
 
 class FeatureModel(th.nn.Module):
@@ -242,11 +315,12 @@ def fit(train_x: np.ndarray, train_y: np.ndarray, val_x: np.ndarray, val_y: np.n
     return model, {"val_auc": best, "best_epoch": int(np.argmax(history)) + 1, "history": history}
 
 
-def feature_aucs(train_x: np.ndarray, train_y: np.ndarray, val_x: np.ndarray, val_y: np.ndarray) -> dict[str, Any]:
+def feature_aucs(train_x: np.ndarray, train_y: np.ndarray, val_x: np.ndarray, val_y: np.ndarray,
+                 names: tuple[str, ...] = FEATURES) -> dict[str, Any]:
     """Each feature's own held-out AUC as a risk score, its direction (+1: larger is riskier) read from the
     training labels."""
     out = {}
-    for j, name in enumerate(FEATURES):
+    for j, name in enumerate(names):
         sign = 1.0 if fall_risk.auc(train_y, train_x[:, j]) >= 0.5 else -1.0
         out[name] = {"sign": sign, "val_auc": fall_risk.auc(val_y, sign * val_x[:, j])}
     return out
@@ -297,24 +371,37 @@ def logit(p: np.ndarray) -> np.ndarray:
     return np.log(p / (1 - p))
 
 
-def report(features: pathlib.Path, fcn_risk: np.ndarray | None, epochs: int = 20,
-           seed: int = 0) -> tuple[dict[str, Any], dict[str, FeatureModel], dict[str, np.ndarray]]:
+def ensemble(*risks: np.ndarray) -> np.ndarray:
+    """The risks' logits averaged (equal weights, nothing fitted), as a probability."""
+    return 1 / (1 + np.exp(-np.mean([logit(r) for r in risks], axis=0)))
+
+
+def report(features: pathlib.Path, fcn_risk: np.ndarray | None, epochs: int = 20, seed: int = 0,
+           fcn_test_risk: np.ndarray | None = None
+           ) -> tuple[dict[str, Any], dict[str, FeatureModel], dict[str, np.ndarray], dict[str, np.ndarray]]:
     """The fit's report on a `build` file: the logistic and MLP models' held-out AUCs, each feature's own,
-    and with ``fcn_risk`` (the fall model's held-out risk, in the file's held-out label order) its AUC and
-    the two-fold AUCs of the features alone and joined to it. Also the two models and the held-out risks
-    (``mlp``, ``logistic``, ``joint``)."""
+    and with ``fcn_risk`` (the fall model's held-out risk, in the file's held-out label order) its AUC, the
+    two-fold AUCs of the features alone and joined to it, and the `ensemble` of it and the MLP. Where the file
+    holds a test set (`build`'s ``fresh``), ``test``: the same models' AUCs on it (the fall model's with
+    ``fcn_test_risk``). Also the two models, and the held-out and test risks (``mlp``, ``logistic``, ``joint``,
+    ``ensemble``, ...)."""
     z = np.load(features, allow_pickle=False)
-    if tuple(str(n) for n in z["names"]) != FEATURES:
-        raise ValueError(f"{features} holds other features ({list(z['names'])}); rebuild it with `features`")
+    names = tuple(str(n) for n in z["names"])
+    if names not in (feature_names(False), feature_names(True)):
+        raise ValueError(f"{features} holds other features ({list(names)}); rebuild it with `features`")
     tx, ty, vx, vy = z["train_x"], z["train_y"].astype(np.float64), z["val_x"], z["val_y"].astype(np.float64)
-    out: dict[str, Any] = {"train_labels": len(ty), "val_labels": len(vy), "val_invalid": float(vy.mean()),
+    out: dict[str, Any] = {"features_set": "blockers" if names == feature_names(True) else "named",
+                           "train_labels": len(ty), "val_labels": len(vy), "val_invalid": float(vy.mean()),
                            "epochs": epochs}
-    models, risks = {}, {}
+    models, risks, test = {}, {}, {}
+    has_test = "test_x" in z.files
     for name, hidden in (("logistic", 0), ("mlp", 64)):
         models[name], hist = fit(tx, ty, vx, vy, hidden=hidden, epochs=epochs, seed=seed)
         out[name] = hist
         risks[name] = models[name].risk(vx)
-    out["features"] = feature_aucs(tx, ty, vx, vy)
+        if has_test:
+            test[name] = models[name].risk(z["test_x"])
+    out["features"] = feature_aucs(tx, ty, vx, vy, names)
     if fcn_risk is not None:
         if len(fcn_risk) != len(vy):
             raise ValueError(f"the fall model's risk has {len(fcn_risk)} entries for {len(vy)} held-out labels")
@@ -323,14 +410,22 @@ def report(features: pathlib.Path, fcn_risk: np.ndarray | None, epochs: int = 20
         joined = np.column_stack([vx, logit(fcn_risk)])
         risks["joint"] = twofold(joined, vy, scenes, epochs=epochs, seed=seed)
         risks["joint_logistic"] = twofold(joined, vy, scenes, hidden=0, epochs=epochs, seed=seed)
-        # no fit on held-out labels at all: the fall model's and the feature MLP's logits, averaged
-        risks["ensemble"] = 1 / (1 + np.exp(-(logit(fcn_risk) + logit(risks["mlp"])) / 2))
+        risks["ensemble"] = ensemble(fcn_risk, risks["mlp"])  # no fit on held-out labels at all
         out["twofold"] = {"scenes": int(len(np.unique(scenes))), "fcn": fall_risk.auc(vy, fcn_risk),
                           "features": fall_risk.auc(vy, risks["features_twofold"]),
                           "joint": fall_risk.auc(vy, risks["joint"]),
                           "joint_logistic": fall_risk.auc(vy, risks["joint_logistic"])}
         out["ensemble"] = fall_risk.auc(vy, risks["ensemble"])
-    return out, models, risks
+    if has_test:
+        sy = z["test_y"].astype(np.float64)
+        if fcn_test_risk is not None:
+            if len(fcn_test_risk) != len(sy):
+                raise ValueError(f"the fall model's test risk has {len(fcn_test_risk)} entries for {len(sy)} labels")
+            test["fcn"] = fcn_test_risk
+            test["ensemble"] = ensemble(fcn_test_risk, test["mlp"])
+        out["test"] = {"labels": len(sy), "invalid": float(sy.mean()),
+                       **{k: fall_risk.auc(sy, r) for k, r in test.items()}}
+    return out, models, risks, test
 
 
 def reading(result: dict[str, Any], bar: float = 0.886) -> str:
@@ -346,12 +441,23 @@ def reading(result: dict[str, Any], bar: float = 0.886) -> str:
     return "neither"
 
 
-def fcn_held_out_risk(data: pathlib.Path, model_path: pathlib.Path, val_fraction: float,
-                      max_shards: str | None) -> np.ndarray:
-    """The fall model's risk at each held-out pick label of the split (the `build` file's order)."""
+def fcn_risks(data: pathlib.Path, model_path: pathlib.Path, val_fraction: float, max_shards: str | None,
+              fresh: str | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """The fall model's risk at each held-out pick label of the split, and with ``fresh`` at each label of
+    `fresh_split`'s test set (the `build` file's orders)."""
     model = fall_risk.FallRiskModel.load(model_path)
     _, val = fall_risk.load_splits(data, val_fraction, max_shards)
-    return fall_risk.scores(model, val).astype(np.float64)
+    test = None if fresh is None else fall_risk.scores(model, fresh_split(data, max_shards, fresh)).astype(np.float64)
+    return fall_risk.scores(model, val).astype(np.float64), test
+
+
+def offline(checkpoint: str, split: fall_risk.Split, scored: dict[str, np.ndarray]) -> dict[str, Any]:
+    """`research.fall_risk.penalty_report` of each risk in ``scored`` (at ``split``'s labels)."""
+    if split.sorted_change is None:
+        raise ValueError("the offline check needs a teacher dataset's change in sorted objects")
+    values, groups = fall_risk.pick_values(checkpoint, split)
+    return {"checkpoint": checkpoint, **fall_risk.penalty_report(split.label.numpy(), split.sorted_change, values,
+                                                                 scored, groups)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -363,8 +469,12 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--data", type=pathlib.Path, required=True)
         p.add_argument("--max-shards", default=None)
         p.add_argument("--val-fraction", type=float, default=0.2)
+        p.add_argument("--fresh", default=None,
+                       help="a test set: the shards this --max-shards spec selects that --max-shards leaves out")
         p.add_argument("--out", type=pathlib.Path, required=True)
-        if name == "fit":
+        if name == "features":
+            p.add_argument("--blockers", action="store_true", help="round two's blocker features too")
+        else:
             p.add_argument("--features", type=pathlib.Path, required=True, help="the `features` file")
             p.add_argument("--fall-model", type=pathlib.Path, default=None, help="the fall model to join (.pt)")
             p.add_argument("--epochs", type=int, default=20)
@@ -373,29 +483,31 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         if args.command == "features":
-            print(json.dumps(build(args.data, args.out, args.val_fraction, args.max_shards)))
+            print(json.dumps(build(args.data, args.out, args.val_fraction, args.max_shards, args.blockers,
+                                   args.fresh)))
             return 0
         if not args.features.is_file():
             raise ValueError(f"{args.features} does not exist; make it with `features`")
-        risk = (fcn_held_out_risk(args.data, args.fall_model, args.val_fraction, args.max_shards)
-                if args.fall_model is not None else None)
-        result, models, risks = report(args.features, risk, args.epochs)
-        result |= {"max_shards": args.max_shards, "val_fraction": args.val_fraction,
+        risk, test_risk = (fcn_risks(args.data, args.fall_model, args.val_fraction, args.max_shards, args.fresh)
+                           if args.fall_model is not None else (None, None))
+        result, models, risks, test = report(args.features, risk, args.epochs, fcn_test_risk=test_risk)
+        result |= {"max_shards": args.max_shards, "val_fraction": args.val_fraction, "fresh": args.fresh,
                    "fall_model": str(args.fall_model) if args.fall_model else None, "reading": reading(result)}
         if args.checkpoint is not None:
             _, val = fall_risk.load_splits(args.data, args.val_fraction, args.max_shards)
-            if val.sorted_change is None:
-                raise ValueError(f"{args.data} is not a teacher dataset: no change in sorted objects to weigh")
-            values, groups = fall_risk.pick_values(args.checkpoint, val)
-            scored = {k: v for k, v in risks.items() if k in ("mlp", "joint", "ensemble")}
-            result["offline"] = {"checkpoint": args.checkpoint, **fall_risk.penalty_report(
-                val.label.numpy(), val.sorted_change, values, scored, groups)}
+            keep = ("mlp", "joint", "ensemble")
+            result["offline"] = offline(args.checkpoint, val, {k: v for k, v in risks.items() if k in keep})
+            if test:
+                result["test_offline"] = offline(args.checkpoint, fresh_split(args.data, args.max_shards, args.fresh),
+                                                 {k: v for k, v in test.items() if k in keep + ("fcn",)})
         write_json_atomically(args.out, result)
         weights = {name: m.state_dict() for name, m in models.items()}
         write_atomically(args.out.with_suffix(".models.pt"), lambda tmp: th.save(weights, tmp))
         brief = {k: result[k] for k in ("train_labels", "val_labels", "reading")}
         brief |= {"mlp": result["mlp"]["val_auc"], "logistic": result["logistic"]["val_auc"],
-                  **{f"twofold_{k}": v for k, v in result.get("twofold", {}).items()}}
+                  "ensemble": result.get("ensemble"),
+                  **{f"twofold_{k}": v for k, v in result.get("twofold", {}).items()},
+                  **{f"test_{k}": v for k, v in result.get("test", {}).items()}}
         print(json.dumps(brief))
     except ValueError as err:
         print(f"python -m research.fall_geometry {args.command}: {err}", file=sys.stderr)

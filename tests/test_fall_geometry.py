@@ -74,13 +74,27 @@ def test_each_feature_is_the_crafted_scene_s_geometry():
     assert y["region_tallest"] == pytest.approx(b)
     mirrored = fg.geometry_features(obs[:, :, ::-1].copy(), np.array([7 * 60 + 59 - 12]))
     assert np.allclose(mirrored, x[:1])  # the features are symmetric under the left-right mirror
+    # round two: B blocks A's carry (its 12 cm top is above A's bottom, Z_CARRY - 10 cm)
+    both = fg.geometry_features(obs, cells[:2], blockers=True)
+    assert np.array_equal(both[:, :len(fg.FEATURES)], x[:2])  # round one's columns unchanged
+    blocked = dict(zip(fg.BLOCKER_FEATURES, both[0, len(fg.FEATURES):].astype(float)))
+    assert blocked["blockers"] == 1 and blocked["blocker_gap"] == 10 and blocked["blocker_to_opening"] == 17
+    assert blocked["blocker_rows"] == 3 and blocked["blocker_cols"] == 5 and blocked["blocker_area"] == 15
+    assert blocked["blocker_in_corridor"] == pytest.approx(3 / 5) and blocked["blockers_area"] == 15
+    assert blocked["blocker_stopped"] == 0 and blocked["carry_bottom"] == pytest.approx(Z_CARRY - a, abs=1e-6)
+    free = dict(zip(fg.BLOCKER_FEATURES, both[1, len(fg.FEATURES):].astype(float)))
+    assert free["blockers"] == 0 and free["blocker_area"] == 0 and free["carry_bottom"] == pytest.approx(Z_CARRY - b)
+    stopper = obs.copy()  # a low object in front of B, in B's columns but not A's: it may stop B
+    paint(stopper, slice(26, 28), slice(16, 18), CLASS_RGB[2], 0.03)
+    stopped = dict(zip(fg.feature_names(True), fg.geometry_features(stopper, cells[:1], blockers=True)[0]))
+    assert stopped["blocker_stopped"] == 1 and stopped["blockers"] == 1 and stopped["corridor_cells"] == 9
     with pytest.raises(ValueError, match="one \\(4, H, W\\) observation"):
         fg.geometry_features(obs[:3], cells)
     with pytest.raises(ValueError, match="cells must lie in"):
         fg.geometry_features(obs, np.array([2400]))
 
 
-def corridor_shards(folder, shards=2, episodes=8, states=5, seed=0):
+def corridor_shards(folder, shards=3, episodes=8, states=5, seed=0):
     """A teacher dataset of 20 x 30 cells (2 cm) whose picks fall exactly when a taller-than-clearance object
     stands in front of the picked one in its columns (the carry account of `shelf_env.conditions.safe_picks`)."""
     from shelf_env.privileged import dataset
@@ -121,12 +135,18 @@ def test_the_command_line_learns_a_corridor_rule_and_joins_the_fall_model(tmp_pa
     args = ["--data", str(data), "--val-fraction", "0.25"]
     assert fg.main(["fit", *args, "--features", str(tmp_path / "none.npz"), "--out", str(tmp_path / "r.json")]) == 2
     assert "make it with `features`" in capsys.readouterr().err and not (tmp_path / "r.json").exists()
-    assert fg.main(["features", *args, "--out", str(tmp_path / "f.npz")]) == 0
+    args += ["--max-shards", "s00:2"]
+    assert fg.main(["features", *args, "--fresh", "s00:2", "--out", str(tmp_path / "f.npz")]) == 2
+    assert "selects no shard" in capsys.readouterr().err and not (tmp_path / "f.npz").exists()
+    assert fg.main(["features", *args, "--out", str(tmp_path / "f.npz"), "--fresh", "s00:3", "--blockers"]) == 0
     built = json.loads(capsys.readouterr().out)
-    train, val = fr.load_splits(data, 0.25)
+    train, val = fr.load_splits(data, 0.25, max_shards="s00:2")
+    test = fg.fresh_split(data, "s00:2", "s00:3")  # the third shard, every state: no fall model read it
+    assert len(test.obs) == 8 * 5 and built["test_labels"] == len(test.label) == 8 * 5 * 7
     assert built["train_labels"] == len(train.label) and built["val_labels"] == len(val.label)
     with np.load(tmp_path / "f.npz") as z:
-        assert np.array_equal(z["val_y"], val.label.numpy()) and z["train_x"].shape == (len(train.label), 26)
+        assert np.array_equal(z["val_y"], val.label.numpy()) and z["train_x"].shape == (len(train.label), 36)
+        assert np.array_equal(z["test_y"], test.label.numpy()) and z["test_x"].shape == (len(test.label), 36)
         assert len(np.unique(z["val_scene"])) == 4  # the last 4 of 16 scenes, held out
     fall_model = tmp_path / "fm.pt"
     fr.FallRiskModel(4, (4, 8, 8)).save(fall_model)  # an untrained fall model: the features carry the rule
@@ -136,8 +156,13 @@ def test_the_command_line_learns_a_corridor_rule_and_joins_the_fall_model(tmp_pa
     env.close()
     out = tmp_path / "r.json"
     assert fg.main(["fit", *args, "--features", str(tmp_path / "f.npz"), "--fall-model", str(fall_model),
-                    "--epochs", "40", "--checkpoint", str(tmp_path / "p.zip"), "--out", str(out)]) == 0
+                    "--epochs", "40", "--checkpoint", str(tmp_path / "p.zip"), "--out", str(out), "--fresh",
+                    "s00:3"]) == 0
     report = json.loads(out.read_text())
+    assert report["features_set"] == "blockers" and report["test"]["labels"] == len(test.label)
+    assert report["test"]["mlp"] > 0.95 and report["test"]["fcn"] == pytest.approx(fr.auc(test.label.numpy(), fr.scores(
+        fr.FallRiskModel.load(fall_model), test)))
+    assert set(report["test_offline"]["poolings"]) == {"mlp", "joint", "ensemble", "fcn"} - {"joint"}
     assert report["mlp"]["val_auc"] > 0.95 and report["reading"] == "features"
     assert len(report["mlp"]["history"]) == 40 and report["mlp"]["val_auc"] == max(report["mlp"]["history"])
     margin = report["features"]["carry_margin_05"]
@@ -146,7 +171,7 @@ def test_the_command_line_learns_a_corridor_rule_and_joins_the_fall_model(tmp_pa
     assert report["twofold"]["fcn"] == pytest.approx(fr.auc(val.label.numpy(), fr.scores(
         fr.FallRiskModel.load(fall_model), val)))
     offline = report["offline"]
-    assert set(offline["poolings"]) == {"mlp", "joint"} and offline["labels"] == len(val.label)
+    assert set(offline["poolings"]) == {"mlp", "joint", "ensemble"} and offline["labels"] == len(val.label)
     assert offline["oracle"]["invalid"] <= offline["poolings"]["mlp"]["hard"][0]["invalid"] + 1e-9
     assert out.with_suffix(".models.pt").is_file()
 
