@@ -266,6 +266,9 @@ class FeatureModel(th.nn.Module):
     """Logistic regression (``hidden`` 0) or an MLP (two ``hidden``-wide ReLU layers) on standardised
     features; ``mean`` and ``std`` are the training features'."""
 
+    mean: th.Tensor
+    std: th.Tensor
+
     def __init__(self, mean: np.ndarray, std: np.ndarray, hidden: int = 64) -> None:
         super().__init__()
         self.register_buffer("mean", th.as_tensor(mean, dtype=th.float32))
