@@ -17,6 +17,7 @@ occluded cells around it, its class's region and the scene (`FEATURES`). Then:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import pathlib
 import sys
@@ -463,11 +464,76 @@ def offline(checkpoint: str, split: fall_risk.Split, scored: dict[str, np.ndarra
                                                                  scored, groups)}
 
 
+#: `feature_channels`' quantisation: uint8 steps per standard deviation around 128 (clipped at +-4 sd).
+CHANNEL_STEPS = 32
+
+
+def feature_channels(obs: np.ndarray, mean: np.ndarray, std: np.ndarray, blockers: bool = True) -> np.ndarray:
+    """(K, H, W) uint8: `geometry_features` at every cell of ``obs``, standardised with ``mean`` and ``std``
+    (the training labels'), ``CHANNEL_STEPS`` steps per standard deviation around 128."""
+    rows, cols = np.asarray(obs).shape[1:]
+    x = geometry_features(obs, np.arange(rows * cols), blockers)
+    if x.shape[1] != len(mean) or len(mean) != len(std):
+        raise ValueError(f"{x.shape[1]} features, but a normalisation of {len(mean)} means and {len(std)} spreads")
+    z = (x - mean) / np.where(std > 0, std, 1.0)
+    q = np.clip(np.round(z * CHANNEL_STEPS + 128), 0, 255).astype(np.uint8)
+    return q.T.reshape(-1, rows, cols)
+
+
+def with_channels(split: fall_risk.Split, mean: np.ndarray, std: np.ndarray, blockers: bool = True
+                  ) -> fall_risk.Split:
+    """``split`` with `feature_channels` appended to every observation (labels unchanged)."""
+    obs = split.obs.numpy()
+    extra = np.stack([feature_channels(o, mean, std, blockers) for o in obs]) if len(obs) else np.zeros(
+        (0, len(mean), *obs.shape[2:]), np.uint8)
+    return dataclasses.replace(split, obs=th.as_tensor(np.concatenate([obs, extra], axis=1)))
+
+
+def channels_run(data: pathlib.Path, features: pathlib.Path, out: pathlib.Path, val_fraction: float,
+                 max_shards: str | None, fresh: str | None, checkpoint: str | None, epochs: int = 8,
+                 fall_model: pathlib.Path | None = None) -> dict[str, Any]:
+    """Round three (docs/experiments/fall-geometry.md): the fall model's recipe from scratch on the camera
+    observation plus `feature_channels` (normalised with the ``features`` file's training features), saved to
+    ``out`` (``.pt``); its AUC on the validation split and the test set (``fresh``), with the offline check of
+    ``checkpoint``'s choice on both."""
+    z = np.load(features, allow_pickle=False)
+    names = tuple(str(n) for n in z["names"])
+    blockers = names == feature_names(True)
+    if names not in (feature_names(False), feature_names(True)):
+        raise ValueError(f"{features} holds other features ({list(names)}); rebuild it with `features`")
+    mean, std = z["train_x"].mean(axis=0), z["train_x"].std(axis=0)
+    train, val = fall_risk.load_splits(data, val_fraction, max_shards)
+    wide_train, wide_val = with_channels(train, mean, std, blockers), with_channels(val, mean, std, blockers)
+    model, history, best = fall_risk.fit_fall_risk(wide_train, wide_val, init=None, epochs=epochs)
+    del wide_train
+    info = {"obs_shape": list(wide_val.obs.shape[1:]), "features": list(names), "mean": mean.tolist(),
+            "std": std.tolist(), "channel_steps": CHANNEL_STEPS, "data": str(data), "max_shards": max_shards,
+            "val_fraction": val_fraction, "epochs": epochs, "best_epoch": best, "history": history}
+    model.save(out, info)
+    result: dict[str, Any] = {"model": str(out), "best_epoch": best, "history": history,
+                              "val_auc": fall_risk.auc(val.label.numpy(), fall_risk.scores(model, wide_val))}
+    sets = {"val": (val, wide_val)}
+    if fresh is not None:
+        test = fresh_split(data, max_shards, fresh)
+        sets["test"] = (test, with_channels(test, mean, std, blockers))
+        result["test_auc"] = fall_risk.auc(test.label.numpy(), fall_risk.scores(model, sets["test"][1]))
+    reference = fall_risk.FallRiskModel.load(fall_model) if fall_model is not None else None
+    for name, (plain, wide) in sets.items():
+        risks = {"channels": fall_risk.scores(model, wide).astype(np.float64)}
+        if reference is not None:
+            risks["fcn"] = fall_risk.scores(reference, plain).astype(np.float64)
+            result[f"{name}_fcn_auc"] = fall_risk.auc(plain.label.numpy(), risks["fcn"])
+        if checkpoint is not None:
+            result[f"{name}_offline"] = offline(checkpoint, plain, risks)
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m research.fall_geometry", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     for name, text in (("features", "the named features of the fall model's split (.npz)"),
-                       ("fit", "the feature models, each feature's AUC, and the features joined to the fall model")):
+                       ("fit", "the feature models, each feature's AUC, and the features joined to the fall model"),
+                       ("channels", "the fall model from scratch with the features as input channels")):
         p = sub.add_parser(name, help=text)
         p.add_argument("--data", type=pathlib.Path, required=True)
         p.add_argument("--max-shards", default=None)
@@ -477,6 +543,13 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--out", type=pathlib.Path, required=True)
         if name == "features":
             p.add_argument("--blockers", action="store_true", help="round two's blocker features too")
+        elif name == "channels":
+            p.add_argument("--features", type=pathlib.Path, required=True,
+                           help="the `features` file (its set; its training features normalise the channels)")
+            p.add_argument("--fall-model", type=pathlib.Path, default=None, help="the fall model to compare (.pt)")
+            p.add_argument("--epochs", type=int, default=8)
+            p.add_argument("--checkpoint", default=None, help="with it, the offline check on each set")
+            p.add_argument("--report", type=pathlib.Path, required=True, help="the report (JSON)")
         else:
             p.add_argument("--features", type=pathlib.Path, required=True, help="the `features` file")
             p.add_argument("--fall-model", type=pathlib.Path, default=None, help="the fall model to join (.pt)")
@@ -491,6 +564,12 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if not args.features.is_file():
             raise ValueError(f"{args.features} does not exist; make it with `features`")
+        if args.command == "channels":
+            result = channels_run(args.data, args.features, args.out, args.val_fraction, args.max_shards, args.fresh,
+                                  args.checkpoint, args.epochs, args.fall_model)
+            write_json_atomically(args.report, result)
+            print(json.dumps({k: v for k, v in result.items() if k.endswith("auc") or k == "best_epoch"}))
+            return 0
         risk, test_risk = (fcn_risks(args.data, args.fall_model, args.val_fraction, args.max_shards, args.fresh)
                            if args.fall_model is not None else (None, None))
         result, models, risks, test = report(args.features, risk, args.epochs, fcn_test_risk=test_risk)

@@ -185,3 +185,41 @@ def test_the_reading_and_the_two_fold_split():
     assert folds.tolist() == [1, 1, 0, 0, 0, 1]  # scenes 3, 7, 9, 12 alternate; a scene stays in one fold
     with pytest.raises(ValueError, match="two scenes"):
         fg.twofold(np.zeros((4, 2)), np.array([0, 1, 0, 1.0]), np.array([5, 5, 5, 5]))
+
+
+def test_feature_channels_hold_each_cell_s_features(tmp_path):
+    obs = crafted()
+    x = fg.geometry_features(obs, np.arange(40 * 60), blockers=True)
+    mean, std = x.mean(axis=0), x.std(axis=0)
+    channels = fg.feature_channels(obs, mean, std)
+    assert channels.shape == (36, 40, 60) and channels.dtype == np.uint8
+    a = (x[7 * 60 + 12] - mean) / np.where(std > 0, std, 1)
+    assert np.array_equal(channels[:, 7, 12], np.clip(np.round(a * fg.CHANNEL_STEPS + 128), 0, 255))
+    flat = std == 0  # a feature that never varies sits at 128
+    assert (channels[flat] == 128).all()
+    with pytest.raises(ValueError, match="normalisation of 3 means"):
+        fg.feature_channels(obs, mean[:3], std[:3])
+
+
+def test_the_fall_model_with_feature_channels_reports_what_its_saved_weights_score(tmp_path, capsys):
+    data = tmp_path / "data"
+    corridor_shards(data)
+    args = ["--data", str(data), "--val-fraction", "0.25", "--max-shards", "s00:2"]
+    assert fg.main(["features", *args, "--blockers", "--out", str(tmp_path / "f.npz")]) == 0
+    capsys.readouterr()
+    out, report = tmp_path / "ch.pt", tmp_path / "ch.json"
+    assert fg.main(["channels", *args, "--features", str(tmp_path / "f.npz"), "--fresh", "s00:3", "--epochs", "10",
+                    "--out", str(out), "--report", str(report)]) == 0
+    result = json.loads(report.read_text())
+    model = fr.FallRiskModel.load(out)
+    assert model.in_channels == 40 and model.info["obs_shape"] == [40, 20, 30] and len(model.info["mean"]) == 36
+    assert result["best_epoch"] == int(np.argmax([h["val_auc"] for h in result["history"]])) + 1
+    assert result["val_auc"] > 0.7 and result["test_auc"] > 0.7  # it learns (chance: 0.5)
+    with np.load(tmp_path / "f.npz") as z:
+        mean, std = z["train_x"].mean(axis=0), z["train_x"].std(axis=0)
+    assert np.allclose(model.info["mean"], mean)  # the channels are normalised with the training features
+    test = fg.with_channels(fg.fresh_split(data, "s00:2", "s00:3"), mean, std)
+    assert result["test_auc"] == pytest.approx(fr.auc(test.label.numpy(), fr.scores(model, test)))
+    assert fg.main(["channels", *args, "--features", str(tmp_path / "none.npz"), "--out", str(tmp_path / "x.pt"),
+                    "--report", str(tmp_path / "x.json")]) == 2
+    assert "make it with `features`" in capsys.readouterr().err and not (tmp_path / "x.pt").exists()

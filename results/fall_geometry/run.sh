@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Named fall geometry against the learned fall model (docs/experiments/fall-geometry.md):
+#   1. per labelled pick of the fall model's split (results/teacher_fall_filter's 374 shards, the last 20 % of each
+#      series' scenes held out) and of a test set no fall model read (the shards s03_00054..94 and s04_00010..58):
+#      the named features (round one) -> features.npz, and with the blocker features (round two)
+#      -> features_blockers.npz
+#   2. per feature set: a logistic regression and an MLP, each feature's own AUC, the features joined to the
+#      from-scratch fall model (two-fold by scene) and averaged with it (ensemble), on the validation split and on
+#      the test set, with the offline check of the shipped P+S's choice among the labelled picks
+#      -> fit.json, fit_blockers.json (and their .models.pt)
+# Each step skips what is on disk.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+bash scripts/setup.sh >/dev/null
+. .venv/bin/activate
+export OMP_NUM_THREADS=1
+out=results/fall_geometry
+shards=s00:55,s01:50,s02:205,s03:54,s04:10
+fresh=s03:95,s04:59
+fall_model=results/teacher_fall_filter/scratch/ff_scratch.fall_risk.pt
+for set in "" _blockers; do
+    flag=${set:+--blockers}
+    [ -f "$out/features$set.npz" ] || python -m research.fall_geometry features --data data/teacher \
+        --max-shards "$shards" --val-fraction 0.2 --fresh "$fresh" $flag --out "$out/features$set.npz"
+    [ -f "$out/fit$set.json" ] || python -m research.fall_geometry fit --data data/teacher --max-shards "$shards" \
+        --val-fraction 0.2 --fresh "$fresh" --features "$out/features$set.npz" --fall-model "$fall_model" \
+        --checkpoint examples/pretrained/p_s.zip --out "$out/fit$set.json"
+done
+python - "$out" <<'PY'
+import json, sys
+for name in ("fit", "fit_blockers"):
+    r = json.load(open(f"{sys.argv[1]}/{name}.json"))
+    print(f"{name}: validation MLP {r['mlp']['val_auc']:.3f} (epoch {r['mlp']['best_epoch']}), logistic "
+          f"{r['logistic']['val_auc']:.3f}, fall model {r['twofold']['fcn']:.3f}, ensemble {r['ensemble']:.3f}; "
+          f"test " + ", ".join(f"{k} {v:.3f}" for k, v in r["test"].items() if k not in ("labels", "invalid")))
+    for where in ("offline", "test_offline"):
+        o = r[where]
+        print(f"  {where}: unfiltered {100 * o['unfiltered']['invalid']:.1f} % / {o['unfiltered']['sorted']:.3f}, "
+              f"candidate {o['candidate']}")
+PY
