@@ -19,16 +19,18 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import pathlib
 import sys
 from typing import Any
 
 import cv2
+import gymnasium as gym
 import numpy as np
 import torch as th
 
 from research import fall_risk
-from shelf_env import params
+from shelf_env import params, policies
 from shelf_env.baselines.heuristics import object_blobs, object_classes
 from shelf_env.camera.heightmap import OCCLUDED_RGB, REGION_RGB, observed_height
 from shelf_env.conditions.safe_picks import Z_CARRY
@@ -274,7 +276,7 @@ class FeatureModel(th.nn.Module):
         super().__init__()
         self.register_buffer("mean", th.as_tensor(mean, dtype=th.float32))
         self.register_buffer("std", th.as_tensor(np.where(std > 0, std, 1.0), dtype=th.float32))
-        n = len(mean)
+        n, self.hidden = len(mean), int(hidden)
         self.net = (th.nn.Linear(n, 1) if hidden == 0 else
                     th.nn.Sequential(th.nn.Linear(n, hidden), th.nn.ReLU(), th.nn.Linear(hidden, hidden),
                                      th.nn.ReLU(), th.nn.Linear(hidden, 1)))
@@ -528,6 +530,107 @@ def channels_run(data: pathlib.Path, features: pathlib.Path, out: pathlib.Path, 
     return result
 
 
+class GeometryRisk:
+    """A per-cell fall risk from a `FeatureModel`: at every object cell, the model's probability on that
+    cell's `geometry_features`; 0 off objects (a pick there holds nothing). Duck-types
+    `research.fall_risk.FallRiskModel` for `research.fall_risk.FallFilter` (``risk``, ``threshold``, ``info``)."""
+
+    def __init__(self, model: FeatureModel, blockers: bool, threshold: float, obs_shape: tuple[int, ...]) -> None:
+        if not 0 < threshold <= 1:
+            raise ValueError(f"threshold must be in (0, 1], got {threshold}")
+        self.model, self.blockers, self.threshold = model, bool(blockers), float(threshold)
+        self.info: dict[str, Any] = {"obs_shape": list(obs_shape)}
+
+    def risk(self, obs: np.ndarray) -> np.ndarray:
+        """(H, W) probability that a pick at each cell ends the episode invalid."""
+        obs = np.asarray(obs)
+        rows, cols = obs.shape[1:]
+        on = np.flatnonzero(object_blobs(obs).reshape(-1) >= 0)
+        out = np.zeros(rows * cols)
+        if len(on):
+            out[on] = self.model.risk(geometry_features(obs, on, self.blockers))
+        return out.reshape(rows, cols)
+
+    def save(self, path: str | pathlib.Path) -> None:
+        """Weights and settings in one torch file, written atomically."""
+        payload = {"state_dict": self.model.state_dict(), "features": len(self.model.mean),
+                   "hidden": self.hidden, "blockers": self.blockers, "threshold": self.threshold,
+                   "obs_shape": self.info["obs_shape"]}
+        write_atomically(path, lambda tmp: th.save(payload, tmp))
+
+    @property
+    def hidden(self) -> int:
+        return self.model.hidden
+
+    @classmethod
+    def load(cls, path: str | pathlib.Path) -> GeometryRisk:
+        path = pathlib.Path(path)
+        if not path.is_file():
+            raise ValueError(f"geometry risk model {str(path)!r} does not exist "
+                             "(python -m research.fall_geometry export makes one)")
+        try:
+            payload = th.load(path, map_location="cpu", weights_only=True)
+            n = int(payload["features"])
+            model = FeatureModel(np.zeros(n), np.ones(n), int(payload["hidden"]))
+            model.load_state_dict(payload["state_dict"])
+            model.eval()
+            return cls(model, bool(payload["blockers"]), float(payload["threshold"]), tuple(payload["obs_shape"]))
+        except ValueError:
+            raise
+        except Exception as err:  # noqa: BLE001  (any failure to read is a bad file)
+            raise ValueError(f"{path} is not a readable geometry risk model: {err}") from err
+
+
+def export(models: pathlib.Path, name: str, features: pathlib.Path, threshold: float, obs_shape: tuple[int, ...],
+           out: pathlib.Path) -> GeometryRisk:
+    """The ``name`` model of a `fit` run's ``.models.pt`` as a `GeometryRisk` at ``threshold``, saved to ``out``
+    (the feature set read from the `fit` run's ``features`` file)."""
+    z = np.load(features, allow_pickle=False)
+    names = tuple(str(n) for n in z["names"])
+    if names not in (feature_names(False), feature_names(True)):
+        raise ValueError(f"{features} holds other features ({list(names)}); rebuild it with `features`")
+    weights = th.load(models, map_location="cpu", weights_only=True)
+    if name not in weights:
+        raise ValueError(f"{models} holds the models {sorted(weights)}, not {name!r}")
+    state = weights[name]
+    hidden = 0 if "net.weight" in state else int(state["net.0.weight"].shape[0])
+    model = FeatureModel(np.zeros(len(names)), np.ones(len(names)), hidden)
+    model.load_state_dict(state)
+    model.eval()
+    risk = GeometryRisk(model, names == feature_names(True), threshold, obs_shape)
+    risk.save(out)
+    return risk
+
+
+#: Appended to a checkpoint's path: play it under `research.fall_risk.FallFilter` with `geometry_risk_path`'s model.
+GEOMETRY_FILTER = "+geometry-filter"
+
+
+def geometry_risk_path(checkpoint: str | os.PathLike) -> pathlib.Path:
+    """The `GeometryRisk` a ``<checkpoint>+geometry-filter`` policy uses: ``<stem>.geometry_risk.pt`` beside it."""
+    path = pathlib.Path(checkpoint)
+    return path.with_name(path.stem + ".geometry_risk.pt")
+
+
+def _check_geometry(base: str) -> None:
+    if base in policies.POLICIES:
+        raise ValueError(f"{GEOMETRY_FILTER} filters a checkpoint's picks with the geometry risk saved beside it; "
+                         f"{base!r} is not a checkpoint")
+    if not geometry_risk_path(base).is_file():
+        raise ValueError(f"policy {base}{GEOMETRY_FILTER}: no geometry risk model at {geometry_risk_path(base)} "
+                         "(python -m research.fall_geometry export makes one)")
+
+
+def _geometry_filtered(agent: Any, env: gym.Env, base: str) -> fall_risk.FallFilter:
+    unwrapped: Any = env.unwrapped
+    risk: Any = GeometryRisk.load(geometry_risk_path(base))
+    return fall_risk.FallFilter(agent, risk, unwrapped.map_names, unwrapped.rows, unwrapped.cols)
+
+
+policies.register_wrapper(GEOMETRY_FILTER, _geometry_filtered, check=_check_geometry,
+                          files=lambda base: [geometry_risk_path(base)])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m research.fall_geometry", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -556,8 +659,24 @@ def main(argv: list[str] | None = None) -> int:
             p.add_argument("--epochs", type=int, default=20)
             p.add_argument("--checkpoint", default=None,
                            help="with it, the offline check (research.fall_risk.penalty_report) of each risk")
+    e = sub.add_parser("export", help="a fit's model as a GeometryRisk (<stem>.geometry_risk.pt for a filter)")
+    e.add_argument("--models", type=pathlib.Path, required=True, help="a fit run's .models.pt")
+    e.add_argument("--name", default="mlp", help="which of its models (mlp, logistic)")
+    e.add_argument("--features", type=pathlib.Path, required=True, help="the fit run's features file")
+    e.add_argument("--threshold", type=float, required=True)
+    e.add_argument("--obs-shape", default="4,40,60", help="the observations it judges (C,H,W)")
+    e.add_argument("--out", type=pathlib.Path, required=True)
     args = parser.parse_args(argv)
     try:
+        if args.command == "export":
+            shape = tuple(int(v) for v in args.obs_shape.split(","))
+            for path in (args.models, args.features):
+                if not path.is_file():
+                    raise ValueError(f"{path} does not exist")
+            exported = export(args.models, args.name, args.features, args.threshold, shape, args.out)
+            print(json.dumps({"out": str(args.out), "threshold": exported.threshold, "hidden": exported.hidden,
+                              "blockers": exported.blockers}))
+            return 0
         if args.command == "features":
             print(json.dumps(build(args.data, args.out, args.val_fraction, args.max_shards, args.blockers,
                                    args.fresh)))
