@@ -223,3 +223,55 @@ def test_the_fall_model_with_feature_channels_reports_what_its_saved_weights_sco
     assert fg.main(["channels", *args, "--features", str(tmp_path / "none.npz"), "--out", str(tmp_path / "x.pt"),
                     "--report", str(tmp_path / "x.json")]) == 2
     assert "make it with `features`" in capsys.readouterr().err and not (tmp_path / "x.pt").exists()
+
+
+def test_the_geometry_risk_scores_every_object_cell_as_the_fit_did_and_filters_a_checkpoint(tmp_path, capsys):
+    """An exported fit model: its risk at each labelled cell is the fit's on that label's features, 0 off
+    objects; ``<zip>+geometry-filter`` plays the checkpoint under `FallFilter` with it."""
+    from research import evaluate  # noqa: F401  (registers the experiments' wrappers)
+    from shelf_env import policies
+
+    data = tmp_path / "data"
+    corridor_shards(data, shards=2)
+    args = ["--data", str(data), "--val-fraction", "0.25"]
+    assert fg.main(["features", *args, "--blockers", "--out", str(tmp_path / "f.npz")]) == 0
+    assert fg.main(["fit", *args, "--features", str(tmp_path / "f.npz"), "--epochs", "5",
+                    "--out", str(tmp_path / "fit.json")]) == 0
+    capsys.readouterr()
+    env = gym.make("ShelfSort-v0", pixel_size=0.02)
+    zip_path = tmp_path / "p.zip"
+    PixelDoubleDQN("FCNPolicy", env, policy_kwargs=dict(maps=[("pick", 0), ("push", 0), ("push", 180)],
+                                                        widths=(4, 8, 8)), seed=0).save(zip_path)
+    with pytest.raises(ValueError, match="no geometry risk model at .*p.geometry_risk.pt"):
+        policies.check_policy(f"{zip_path}+geometry-filter")
+    with pytest.raises(ValueError, match="not a checkpoint"):
+        policies.check_policy("h-d+geometry-filter")
+    bad = ["export", "--models", str(tmp_path / "fit.models.pt"), "--features", str(tmp_path / "f.npz"),
+           "--obs-shape", "4,20,30", "--out", str(fg.geometry_risk_path(zip_path))]
+    assert fg.main([*bad, "--threshold", "1.5"]) == 2
+    assert "threshold must be in (0, 1]" in capsys.readouterr().err and not fg.geometry_risk_path(zip_path).exists()
+    assert fg.main([*bad, "--threshold", "0.5", "--name", "nope"]) == 2
+    assert "not 'nope'" in capsys.readouterr().err
+    assert fg.main([*bad, "--threshold", "0.5"]) == 0
+    risk = fg.GeometryRisk.load(fg.geometry_risk_path(zip_path))
+    assert risk.threshold == 0.5 and risk.blockers and risk.hidden == 64 and risk.info["obs_shape"] == [4, 20, 30]
+    import torch as th
+    fitted = fg.FeatureModel(np.zeros(36), np.ones(36), 64)
+    fitted.load_state_dict(th.load(tmp_path / "fit.models.pt", weights_only=True)["mlp"])
+    _, val = fr.load_splits(data, 0.25)
+    with np.load(tmp_path / "f.npz") as z:
+        expected = fitted.risk(z["val_x"])
+    obs = val.obs[0].numpy()
+    mine = val.state.numpy() == 0
+    per_cell = risk.risk(obs)
+    assert per_cell.shape == (20, 30)
+    assert np.allclose(per_cell.reshape(-1)[val.cell.numpy()[mine]], expected[mine], atol=1e-6)
+    from shelf_env.baselines.heuristics import object_blobs
+    assert (per_cell[object_blobs(obs) < 0] == 0).all()  # nothing to drop where no object is
+    assert policies.check_policy(f"{zip_path}+geometry-filter") == ("pick", "push")
+    policy = policies.make_policy(f"{zip_path}+geometry-filter", env)
+    assert isinstance(policy, fr.FallFilter) and policy.risk.threshold == 0.5
+    action, _ = policy.predict(obs, action_masks=np.ones(env.action_space.n, bool))
+    pick_cells = action < 20 * 30
+    assert not pick_cells or per_cell.reshape(-1)[action] < 0.5  # a pick it plays is one the filter keeps
+    env.close()
