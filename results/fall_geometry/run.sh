@@ -26,6 +26,23 @@ for set in "" _blockers; do
         --val-fraction 0.2 --fresh "$fresh" --features "$out/features$set.npz" --fall-model "$fall_model" \
         --checkpoint examples/pretrained/p_s.zip --out "$out/fit$set.json"
 done
+# 3. round three: the fall model's recipe from scratch with round two's features as 36 more input channels
+#    -> ff_channels.fall_risk.pt, channels.json
+[ -f "$out/channels.json" ] || python -m research.fall_geometry channels --data data/teacher --max-shards "$shards" \
+    --val-fraction 0.2 --fresh "$fresh" --features "$out/features_blockers.npz" --fall-model "$fall_model" \
+    --checkpoint examples/pretrained/p_s.zip --out "$out/ff_channels.fall_risk.pt" --report "$out/channels.json"
+# 4. (added after round two's numbers) round two's MLP as a mask at 0.1 on the shipped P+S, on the validation scenes
+#    (seeds 2000-2002, N = 5, 8, 11); the shipped model's cells reused -> filter/, val90/, val90_pairs.md
+mkdir -p "$out/filter"
+cp -p examples/pretrained/p_s.zip "$out/filter/p_s_geo10.zip"
+[ -f "$out/filter/p_s_geo10.geometry_risk.pt" ] || python -m research.fall_geometry export \
+    --models "$out/fit_blockers.models.pt" --name mlp --features "$out/features_blockers.npz" --threshold 0.1 \
+    --out "$out/filter/p_s_geo10.geometry_risk.pt"
+ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4
+python -m research.evaluate --policies "$out/filter/p_s_geo10.zip+geometry-filter" "$ref=examples/pretrained/p_s.zip" \
+    --ns 5,8,11 --runs 30 --seeds 3 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" \
+    --reuse-cells results/distill_scaling/val90
+python -m shelf_env.evaluation.compare "$out/val90" --pair p_s_geo10+geometry-filter "$ref" --out "$out/val90_pairs.md"
 python - "$out" <<'PY'
 import json, sys
 for name in ("fit", "fit_blockers"):
@@ -37,4 +54,8 @@ for name in ("fit", "fit_blockers"):
         o = r[where]
         print(f"  {where}: unfiltered {100 * o['unfiltered']['invalid']:.1f} % / {o['unfiltered']['sorted']:.3f}, "
               f"candidate {o['candidate']}")
+c = json.load(open(f"{sys.argv[1]}/channels.json"))
+print(f"channels: validation {c['val_auc']:.3f} (epoch {c['best_epoch']}), test {c['test_auc']:.3f}; the fall model "
+      f"{c['val_fcn_auc']:.3f} / {c['test_fcn_auc']:.3f}; candidate on validation {c['val_offline']['candidate']}")
 PY
+cat "$out/val90_pairs.md"
