@@ -303,15 +303,7 @@ def fit(train_x: np.ndarray, train_y: np.ndarray, val_x: np.ndarray, val_y: np.n
     x, y = th.as_tensor(train_x, dtype=th.float32), th.as_tensor(train_y, dtype=th.float32)
     history, best, best_state = [], -1.0, None
     for _ in range(epochs):
-        model.train()
-        order = th.as_tensor(rng.permutation(len(x)))
-        for start in range(0, len(x), batch):
-            sel = order[start:start + batch]
-            loss = th.nn.functional.binary_cross_entropy_with_logits(model(x[sel]), y[sel])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-        model.eval()
+        _epoch(model, opt, x, y, rng, batch)
         score = fall_risk.auc(val_y, model.risk(val_x))
         history.append(score)
         if score > best:
@@ -360,15 +352,21 @@ def _train_fixed(model: FeatureModel, x_np: np.ndarray, y_np: np.ndarray, epochs
     rng = np.random.default_rng(seed)
     opt = th.optim.Adam(model.parameters(), lr=lr)
     x, y = th.as_tensor(x_np, dtype=th.float32), th.as_tensor(y_np, dtype=th.float32)
-    model.train()
     for _ in range(epochs):
-        order = th.as_tensor(rng.permutation(len(x)))
-        for start in range(0, len(x), batch):
-            sel = order[start:start + batch]
-            loss = th.nn.functional.binary_cross_entropy_with_logits(model(x[sel]), y[sel])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
+        _epoch(model, opt, x, y, rng, batch)
+
+
+def _epoch(model: FeatureModel, opt: th.optim.Optimizer, x: th.Tensor, y: th.Tensor, rng: np.random.Generator,
+           batch: int) -> None:
+    """One pass of binary cross-entropy over ``x``, ``y`` in a random order of ``batch``-sized steps."""
+    model.train()
+    order = th.as_tensor(rng.permutation(len(x)))
+    for start in range(0, len(x), batch):
+        sel = order[start:start + batch]
+        loss = th.nn.functional.binary_cross_entropy_with_logits(model(x[sel]), y[sel])
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
     model.eval()
 
 
