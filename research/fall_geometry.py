@@ -340,6 +340,7 @@ def twofold(x: np.ndarray, y: np.ndarray, scenes: np.ndarray, hidden: int = 64, 
         fit_on, score_on = fold != f, fold == f
         if not fit_on.any() or not score_on.any():
             raise ValueError("two-fold needs held-out labels from at least two scenes")
+        th.manual_seed(seed)  # each fold's start from the seed, not from whatever ran before
         model = FeatureModel(x[fit_on].mean(axis=0), x[fit_on].std(axis=0), hidden)
         _train_fixed(model, x[fit_on], y[fit_on], epochs, seed)
         out[score_on] = model.risk(x[score_on])
@@ -348,7 +349,6 @@ def twofold(x: np.ndarray, y: np.ndarray, scenes: np.ndarray, hidden: int = 64, 
 
 def _train_fixed(model: FeatureModel, x_np: np.ndarray, y_np: np.ndarray, epochs: int, seed: int,
                  batch: int = 256, lr: float = 1e-3) -> None:
-    th.manual_seed(seed)
     rng = np.random.default_rng(seed)
     opt = th.optim.Adam(model.parameters(), lr=lr)
     x, y = th.as_tensor(x_np, dtype=th.float32), th.as_tensor(y_np, dtype=th.float32)
