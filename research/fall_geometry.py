@@ -79,7 +79,8 @@ BLOCKER_FEATURES = (
     "blocker_stopped",  # another object stands between the front-most blocker and the opening, in its columns
     "carry_bottom",  # Z_CARRY - the object's highest cell: the carried object's bottom
 )
-#: Widths (metres) the carry corridor is widened by on each side, for ``carry_margin_*``.
+#: Widths (metres) the carry corridor is widened by on each side, for ``carry_margin_*``, rounded to cells as
+#: `shelf_env.conditions.safe_picks` rounds its ``side``: at the dataset's 1 cm cells 0, 2 and 3 cells.
 CORRIDOR_SIDES = (0.005, 0.015, 0.03)
 NEAR_M, GREY_NEAR_M, EDGE_CAP = 0.03, 0.01, 10
 
