@@ -43,6 +43,16 @@ python -m research.evaluate --policies "$out/filter/p_s_geo10.zip+geometry-filte
     --ns 5,8,11 --runs 30 --seeds 3 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" \
     --reuse-cells results/distill_scaling/val90
 python -m shelf_env.evaluation.compare "$out/val90" --pair p_s_geo10+geometry-filter "$ref" --out "$out/val90_pairs.md"
+# 5. (added after the validation numbers) the same filter, unchanged, on issue 10's held-out cells at N = 5, 8, 11
+#    (seeds 0-2) beside the shipped P+S, S, H-d and H-a (their cells from results/models_v3/open), and its greedy fall
+#    rate per action at N = 8 on the first 30 held-out scenes -> heldout/, heldout_pairs.md, falls30.json
+python -m research.evaluate --policies "$out/filter/p_s_geo10.zip+geometry-filter" "$ref=examples/pretrained/p_s.zip" \
+    examples/pretrained/s.zip h-d h-a --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --workers "${WORKERS:-1}" \
+    --out "$out/heldout" --reuse-cells results/models_v3/open
+python -m shelf_env.evaluation.compare "$out/heldout" --pair p_s_geo10+geometry-filter "$ref" \
+    --pair p_s_geo10+geometry-filter h-a --pair p_s_geo10+geometry-filter h-d --out "$out/heldout_pairs.md"
+[ -f "$out/falls30.json" ] || python -c "import research.fall_geometry, sys; from shelf_env.evaluation.falls import main; \
+sys.exit(main(sys.argv[1:]))" "$out/filter/p_s_geo10.zip+geometry-filter" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
 python - "$out" <<'PY'
 import json, sys
 for name in ("fit", "fit_blockers"):
@@ -58,4 +68,4 @@ c = json.load(open(f"{sys.argv[1]}/channels.json"))
 print(f"channels: validation {c['val_auc']:.3f} (epoch {c['best_epoch']}), test {c['test_auc']:.3f}; the fall model "
       f"{c['val_fcn_auc']:.3f} / {c['test_fcn_auc']:.3f}; candidate on validation {c['val_offline']['candidate']}")
 PY
-cat "$out/val90_pairs.md"
+cat "$out/val90_pairs.md" "$out/heldout_pairs.md"
