@@ -53,6 +53,13 @@ python -m shelf_env.evaluation.compare "$out/heldout" --pair p_s_geo10+geometry-
     --pair p_s_geo10+geometry-filter h-a --pair p_s_geo10+geometry-filter h-d --out "$out/heldout_pairs.md"
 [ -f "$out/falls30.json" ] || python -c "import research.fall_geometry, sys; from shelf_env.evaluation.falls import main; \
 sys.exit(main(sys.argv[1:]))" "$out/filter/p_s_geo10.zip+geometry-filter" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
+# 6. (added after the held-out numbers) the filter, then the loop breaker, on the validation scenes -> val90_lb/,
+#    val90_lb_pairs.md (the filter alone's and the shipped model's cells copied from val90/)
+python -m research.evaluate --policies "$out/filter/p_s_geo10.zip+geometry-filter+loop-breaker" \
+    "$out/filter/p_s_geo10.zip+geometry-filter" "$ref=examples/pretrained/p_s.zip" --ns 5,8,11 --runs 30 --seeds 3 \
+    --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90_lb" --reuse-cells "$out/val90"
+python -m shelf_env.evaluation.compare "$out/val90_lb" --pair p_s_geo10+geometry-filter+loop-breaker \
+    p_s_geo10+geometry-filter --pair p_s_geo10+geometry-filter+loop-breaker "$ref" --out "$out/val90_lb_pairs.md"
 python - "$out" <<'PY'
 import json, sys
 for name in ("fit", "fit_blockers"):
@@ -68,4 +75,4 @@ c = json.load(open(f"{sys.argv[1]}/channels.json"))
 print(f"channels: validation {c['val_auc']:.3f} (epoch {c['best_epoch']}), test {c['test_auc']:.3f}; the fall model "
       f"{c['val_fcn_auc']:.3f} / {c['test_fcn_auc']:.3f}; candidate on validation {c['val_offline']['candidate']}")
 PY
-cat "$out/val90_pairs.md" "$out/heldout_pairs.md"
+cat "$out/val90_pairs.md" "$out/heldout_pairs.md" "$out/val90_lb_pairs.md"
