@@ -60,6 +60,20 @@ python -m research.evaluate --policies "$out/filter/p_s_geo10.zip+geometry-filte
     --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90_lb" --reuse-cells "$out/val90"
 python -m shelf_env.evaluation.compare "$out/val90_lb" --pair p_s_geo10+geometry-filter+loop-breaker \
     p_s_geo10+geometry-filter --pair p_s_geo10+geometry-filter+loop-breaker "$ref" --out "$out/val90_lb_pairs.md"
+# 7. (added after the validation numbers of 6) the filter with the loop breaker on the held-out cells, beside the
+#    filter alone, the shipped P+S, S, H-d, H-a (from heldout/) and H-d, H-a with the loop breaker (from
+#    results/distill_test) -> heldout_lb/, heldout_lb_pairs.md
+lb="$out/filter/p_s_geo10.zip+geometry-filter+loop-breaker"
+grid=(--ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/heldout_lb")
+python -m research.evaluate --policies "$lb" "${grid[@]}"
+python -m research.evaluate --policies "$out/filter/p_s_geo10.zip+geometry-filter" "$ref=examples/pretrained/p_s.zip" \
+    examples/pretrained/s.zip h-d h-a "${grid[@]}" --reuse-cells "$out/heldout"
+python -m research.evaluate --policies h-d+loop-breaker h-a+loop-breaker "${grid[@]}" --reuse-cells results/distill_test
+python -m research.evaluate --policies "$lb" "$out/filter/p_s_geo10.zip+geometry-filter" "$ref=examples/pretrained/p_s.zip" \
+    examples/pretrained/s.zip h-d h-a h-d+loop-breaker h-a+loop-breaker "${grid[@]}" --summarize-only
+l=p_s_geo10+geometry-filter+loop-breaker
+python -m shelf_env.evaluation.compare "$out/heldout_lb" --pair $l "$ref" --pair $l p_s_geo10+geometry-filter \
+    --pair $l h-a --pair $l h-d --pair $l h-a+loop-breaker --pair $l h-d+loop-breaker --out "$out/heldout_lb_pairs.md"
 python - "$out" <<'PY'
 import json, sys
 for name in ("fit", "fit_blockers"):
@@ -75,4 +89,4 @@ c = json.load(open(f"{sys.argv[1]}/channels.json"))
 print(f"channels: validation {c['val_auc']:.3f} (epoch {c['best_epoch']}), test {c['test_auc']:.3f}; the fall model "
       f"{c['val_fcn_auc']:.3f} / {c['test_fcn_auc']:.3f}; candidate on validation {c['val_offline']['candidate']}")
 PY
-cat "$out/val90_pairs.md" "$out/heldout_pairs.md" "$out/val90_lb_pairs.md"
+cat "$out/val90_pairs.md" "$out/heldout_pairs.md" "$out/val90_lb_pairs.md" "$out/heldout_lb_pairs.md"
