@@ -224,26 +224,45 @@ def split_features(split: fall_risk.Split, blockers: bool = False) -> np.ndarray
     return out
 
 
-def held_out_scenes(data: pathlib.Path, val_fraction: float, max_shards: str | None) -> np.ndarray:
-    """Per held-out state of `research.fall_risk.load_splits`'s split (in its order), a scene number: the
-    two-fold split of `twofold` keeps each scene's states together."""
-    from shelf_env.privileged import dataset
-    from shelf_env.training.distill import select_shards, split_by_scene
+@dataclasses.dataclass
+class Sets:
+    """The labelled picks a run reads, from one load of the dataset: the fall model's training and validation
+    splits, each validation state's scene, and the test set (`fresh_split`; None without ``fresh``)."""
 
-    shards = select_shards(dataset.load_dataset(data), max_shards)
-    _, val = split_by_scene(shards, val_fraction)
+    train: fall_risk.Split
+    val: fall_risk.Split
+    val_scene: np.ndarray
+    test: fall_risk.Split | None
+
+
+def load_sets(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None = None) -> Sets:
+    """`Sets` of the teacher dataset ``data``: the split of `research.fall_risk.load_splits` (``max_shards``,
+    ``val_fraction``), the scene of each validation state (the two-fold split of `twofold` keeps a scene's
+    states together) and, with ``fresh``, the test set."""
+    from shelf_env.privileged import dataset
+    from shelf_env.training.distill import select_shards
+
+    if not 0 < val_fraction < 1:
+        raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
+    every = dataset.load_dataset(data)
+    shards = select_shards(every, max_shards)
+    train, val, val_index = fall_risk.split_teacher_shards(shards, val_fraction, name=str(data))
     scene = np.concatenate([shard.arrays["state_episode"].astype(np.int64) + 1000 * k
                             for k, shard in enumerate(shards)])
-    return scene[np.array(val)]
+    return Sets(train, val, scene[val_index], None if fresh is None else _fresh(every, max_shards, fresh))
 
 
 def fresh_split(data: pathlib.Path, used: str | None, fresh: str) -> fall_risk.Split:
     """The pick labels of every state of the shards ``fresh`` selects (`select_shards`' spec) that ``used``
     (the fall model's ``--max-shards``) does not: a test set no fall model trained on."""
     from shelf_env.privileged import dataset
+
+    return _fresh(dataset.load_dataset(data), used, fresh)
+
+
+def _fresh(shards: list[Any], used: str | None, fresh: str) -> fall_risk.Split:
     from shelf_env.training.distill import select_shards
 
-    shards = dataset.load_dataset(data)
     taken = {s.path.name for s in select_shards(shards, used)}
     chosen = [s for s in select_shards(shards, fresh) if s.path.name not in taken]
     if not chosen:
@@ -251,18 +270,15 @@ def fresh_split(data: pathlib.Path, used: str | None, fresh: str) -> fall_risk.S
     return fall_risk.teacher_split(chosen, np.arange(sum(s.num_states for s in chosen)))
 
 
-def build(data: pathlib.Path, out: pathlib.Path, val_fraction: float, max_shards: str | None,
-          blockers: bool = False, fresh: str | None = None) -> dict[str, Any]:
-    """The features of the fall model's split (and with ``fresh`` of `fresh_split`'s test set), saved
-    atomically to ``out`` (``.npz``)."""
-    train, val = fall_risk.load_splits(data, val_fraction, max_shards)
+def build(sets: Sets, out: pathlib.Path, blockers: bool = False) -> dict[str, Any]:
+    """The features of ``sets`` (the test set's too, where it has one), saved atomically to ``out`` (``.npz``)."""
+    train, val = sets.train, sets.val
     arrays = {"train_x": split_features(train, blockers), "train_y": train.label.numpy().astype(np.int8),
               "val_x": split_features(val, blockers), "val_y": val.label.numpy().astype(np.int8),
-              "val_state": val.state.numpy(), "val_scene": held_out_scenes(data, val_fraction, max_shards)[
-                  val.state.numpy()], "names": np.array(feature_names(blockers))}
-    if fresh is not None:
-        test = fresh_split(data, max_shards, fresh)
-        arrays |= {"test_x": split_features(test, blockers), "test_y": test.label.numpy().astype(np.int8)}
+              "val_state": val.state.numpy(), "val_scene": sets.val_scene[val.state.numpy()],
+              "names": np.array(feature_names(blockers))}
+    if sets.test is not None:
+        arrays |= {"test_x": split_features(sets.test, blockers), "test_y": sets.test.label.numpy().astype(np.int8)}
 
     def save(path: pathlib.Path) -> None:
         with open(path, "wb") as f:
@@ -454,14 +470,12 @@ def reading(result: dict[str, Any], bar: float = 0.886) -> str:
     return "neither"
 
 
-def fcn_risks(data: pathlib.Path, model_path: pathlib.Path, val_fraction: float, max_shards: str | None,
-              fresh: str | None = None) -> tuple[np.ndarray, np.ndarray | None]:
-    """The fall model's risk at each held-out pick label of the split, and with ``fresh`` at each label of
-    `fresh_split`'s test set (the `build` file's orders)."""
+def fcn_risks(sets: Sets, model_path: pathlib.Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """The fall model's risk at each validation pick label of ``sets``, and at each test label where it has a
+    test set (the `build` file's orders)."""
     model = fall_risk.FallRiskModel.load(model_path)
-    _, val = fall_risk.load_splits(data, val_fraction, max_shards)
-    test = None if fresh is None else fall_risk.scores(model, fresh_split(data, max_shards, fresh)).astype(np.float64)
-    return fall_risk.scores(model, val).astype(np.float64), test
+    test = None if sets.test is None else fall_risk.scores(model, sets.test).astype(np.float64)
+    return fall_risk.scores(model, sets.val).astype(np.float64), test
 
 
 def offline(checkpoint: str, split: fall_risk.Split, scored: dict[str, np.ndarray]) -> dict[str, Any]:
@@ -498,36 +512,33 @@ def with_channels(split: fall_risk.Split, mean: np.ndarray, std: np.ndarray, blo
     return dataclasses.replace(split, obs=th.as_tensor(np.concatenate([obs, extra], axis=1)))
 
 
-def channels_run(data: pathlib.Path, features: pathlib.Path, out: pathlib.Path, val_fraction: float,
-                 max_shards: str | None, fresh: str | None, checkpoint: str | None, epochs: int = 8,
-                 fall_model: pathlib.Path | None = None) -> dict[str, Any]:
+def channels_run(sets: Sets, features: pathlib.Path, out: pathlib.Path, checkpoint: str | None, epochs: int = 8,
+                 fall_model: pathlib.Path | None = None, info: dict[str, Any] | None = None) -> dict[str, Any]:
     """Round three (docs/experiments/fall-geometry.md): the fall model's recipe from scratch on the camera
     observation plus `feature_channels` (normalised with the ``features`` file's training features), saved to
-    ``out`` (``.pt``); its AUC on the validation split and the test set (``fresh``), with the offline check of
-    ``checkpoint``'s choice on both."""
+    ``out`` (``.pt``, with ``info`` about the data); its AUC on the validation split and the test set, with the
+    offline check of ``checkpoint``'s choice on both."""
     z = np.load(features, allow_pickle=False)
     names = tuple(str(n) for n in z["names"])
     blockers = names == feature_names(True)
     if names not in (feature_names(False), feature_names(True)):
         raise ValueError(f"{features} holds other features ({list(names)}); rebuild it with `features`")
     mean, std = z["train_x"].mean(axis=0), z["train_x"].std(axis=0)
-    train, val = fall_risk.load_splits(data, val_fraction, max_shards)
-    wide_train, wide_val = with_channels(train, mean, std, blockers), with_channels(val, mean, std, blockers)
+    val = sets.val
+    wide_train, wide_val = with_channels(sets.train, mean, std, blockers), with_channels(val, mean, std, blockers)
     model, history, best = fall_risk.fit_fall_risk(wide_train, wide_val, init=None, epochs=epochs)
     del wide_train
-    info = {"obs_shape": list(wide_val.obs.shape[1:]), "features": list(names), "mean": mean.tolist(),
-            "std": std.tolist(), "channel_steps": CHANNEL_STEPS, "data": str(data), "max_shards": max_shards,
-            "val_fraction": val_fraction, "epochs": epochs, "best_epoch": best, "history": history}
-    model.save(out, info)
+    model.save(out, {**(info or {}), "obs_shape": list(wide_val.obs.shape[1:]), "features": list(names),
+                     "mean": mean.tolist(), "std": std.tolist(), "channel_steps": CHANNEL_STEPS, "epochs": epochs,
+                     "best_epoch": best, "history": history})
     result: dict[str, Any] = {"model": str(out), "best_epoch": best, "history": history,
                               "val_auc": fall_risk.auc(val.label.numpy(), fall_risk.scores(model, wide_val))}
-    sets = {"val": (val, wide_val)}
-    if fresh is not None:
-        test = fresh_split(data, max_shards, fresh)
-        sets["test"] = (test, with_channels(test, mean, std, blockers))
-        result["test_auc"] = fall_risk.auc(test.label.numpy(), fall_risk.scores(model, sets["test"][1]))
+    sets_ = {"val": (val, wide_val)}
+    if sets.test is not None:
+        sets_["test"] = (sets.test, with_channels(sets.test, mean, std, blockers))
+        result["test_auc"] = fall_risk.auc(sets.test.label.numpy(), fall_risk.scores(model, sets_["test"][1]))
     reference = fall_risk.FallRiskModel.load(fall_model) if fall_model is not None else None
-    for name, (plain, wide) in sets.items():
+    for name, (plain, wide) in sets_.items():
         risks = {"channels": fall_risk.scores(model, wide).astype(np.float64)}
         if reference is not None:
             risks["fcn"] = fall_risk.scores(reference, plain).astype(np.float64)
@@ -685,28 +696,31 @@ def main(argv: list[str] | None = None) -> int:
                               "blockers": exported.blockers}))
             return 0
         if args.command == "features":
-            print(json.dumps(build(args.data, args.out, args.val_fraction, args.max_shards, args.blockers,
-                                   args.fresh)))
+            print(json.dumps(build(load_sets(args.data, args.val_fraction, args.max_shards, args.fresh), args.out,
+                                   args.blockers)))
             return 0
         if not args.features.is_file():
             raise ValueError(f"{args.features} does not exist; make it with `features`")
+        needs_data = args.command == "channels" or args.fall_model is not None or args.checkpoint is not None
+        sets = load_sets(args.data, args.val_fraction, args.max_shards, args.fresh) if needs_data else None
         if args.command == "channels":
-            result = channels_run(args.data, args.features, args.out, args.val_fraction, args.max_shards, args.fresh,
-                                  args.checkpoint, args.epochs, args.fall_model)
+            assert sets is not None
+            result = channels_run(sets, args.features, args.out, args.checkpoint, args.epochs, args.fall_model,
+                                  {"data": str(args.data), "max_shards": args.max_shards,
+                                   "val_fraction": args.val_fraction})
             write_json_atomically(args.report, result)
             print(json.dumps({k: v for k, v in result.items() if k.endswith("auc") or k == "best_epoch"}))
             return 0
-        risk, test_risk = (fcn_risks(args.data, args.fall_model, args.val_fraction, args.max_shards, args.fresh)
-                           if args.fall_model is not None else (None, None))
+        risk, test_risk = (fcn_risks(sets, args.fall_model) if sets is not None and args.fall_model is not None
+                           else (None, None))
         result, models, risks, test = report(args.features, risk, args.epochs, fcn_test_risk=test_risk)
         result |= {"max_shards": args.max_shards, "val_fraction": args.val_fraction, "fresh": args.fresh,
                    "fall_model": str(args.fall_model) if args.fall_model else None, "reading": reading(result)}
-        if args.checkpoint is not None:
-            _, val = fall_risk.load_splits(args.data, args.val_fraction, args.max_shards)
+        if sets is not None and args.checkpoint is not None:
             keep = ("mlp", "joint", "ensemble")
-            result["offline"] = offline(args.checkpoint, val, {k: v for k, v in risks.items() if k in keep})
-            if test:
-                result["test_offline"] = offline(args.checkpoint, fresh_split(args.data, args.max_shards, args.fresh),
+            result["offline"] = offline(args.checkpoint, sets.val, {k: v for k, v in risks.items() if k in keep})
+            if test and sets.test is not None:
+                result["test_offline"] = offline(args.checkpoint, sets.test,
                                                  {k: v for k, v in test.items() if k in keep + ("fcn",)})
         write_json_atomically(args.out, result)
         weights = {name: m.state_dict() for name, m in models.items()}

@@ -382,6 +382,23 @@ def spread_labels(split: Split) -> Split:
                  split.objects, None)
 
 
+def split_teacher_shards(shards: list[Any], val_fraction: float, max_states: int | None = None,
+                         name: str = "the dataset") -> tuple[Split, Split, np.ndarray]:
+    """`load_splits` on loaded teacher-dataset shards: the training and held-out splits (split by scene,
+    `shelf_env.training.distill.split_by_scene`; with ``max_states`` the first that many training states only),
+    and the held-out states' indices over ``shards`` in order."""
+    from shelf_env.training.distill import split_by_scene
+
+    train, val = split_by_scene(shards, val_fraction)
+    if max_states is not None:
+        if max_states < 1:
+            raise ValueError(f"max_states must be >= 1, got {max_states}")
+        train = train[:max_states]
+    if not val:
+        raise ValueError(f"{name}: {len(shards)} shards leave no held-out scene at val_fraction {val_fraction}")
+    return teacher_split(shards, np.array(train)), teacher_split(shards, np.array(val)), np.array(val)
+
+
 def load_splits(data: pathlib.Path, val_fraction: float, max_shards: str | None = None,
                 max_states: int | None = None) -> tuple[Split, Split]:
     """The training and held-out splits of ``data``: a teacher dataset (``sNN_NNNNN.npz`` shards,
@@ -394,17 +411,11 @@ def load_splits(data: pathlib.Path, val_fraction: float, max_shards: str | None 
     if not 0 < val_fraction < 1:
         raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
     if dataset.shard_files(data):
-        from shelf_env.training.distill import select_shards, split_by_scene
+        from shelf_env.training.distill import select_shards
 
-        shards = select_shards(dataset.load_dataset(data), max_shards)
-        train, val = split_by_scene(shards, val_fraction)
-        if max_states is not None:
-            if max_states < 1:
-                raise ValueError(f"max_states must be >= 1, got {max_states}")
-            train = train[:max_states]
-        if not val:
-            raise ValueError(f"{data}: {len(shards)} shards leave no held-out scene at val_fraction {val_fraction}")
-        return teacher_split(shards, np.array(train)), teacher_split(shards, np.array(val))
+        train, val, _ = split_teacher_shards(select_shards(dataset.load_dataset(data), max_shards), val_fraction,
+                                             max_states, str(data))
+        return train, val
     if max_shards is not None or max_states is not None:
         raise ValueError(f"max_shards and max_states select a teacher dataset's shards and states; {data} holds "
                          "none (sNN_NNNNN.npz)")
