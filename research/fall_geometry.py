@@ -290,6 +290,15 @@ def build(sets: Sets, out: pathlib.Path, blockers: bool = False) -> dict[str, An
                      if f"{k}_y" in arrays}
 
 
+def load_features(path: pathlib.Path) -> tuple[Any, tuple[str, ...]]:
+    """A `build` file (its arrays, lazily) and its feature names; a `ValueError` if it holds another feature set."""
+    z = np.load(path, allow_pickle=False)
+    names = tuple(str(n) for n in z["names"])
+    if names not in (feature_names(False), feature_names(True)):
+        raise ValueError(f"{path} holds other features ({list(names)}); rebuild it with `features`")
+    return z, names
+
+
 class FeatureModel(th.nn.Module):
     """Logistic regression (``hidden`` 0) or an MLP (two ``hidden``-wide ReLU layers) on standardised
     features; ``mean`` and ``std`` are the training features'."""
@@ -414,10 +423,7 @@ def report(features: pathlib.Path, fcn_risk: np.ndarray | None, epochs: int = 20
     holds a test set (`build`'s ``fresh``), ``test``: the same models' AUCs on it (the fall model's with
     ``fcn_test_risk``). Also the two models, and the held-out and test risks (``mlp``, ``logistic``, ``joint``,
     ``ensemble``, ...)."""
-    z = np.load(features, allow_pickle=False)
-    names = tuple(str(n) for n in z["names"])
-    if names not in (feature_names(False), feature_names(True)):
-        raise ValueError(f"{features} holds other features ({list(names)}); rebuild it with `features`")
+    z, names = load_features(features)
     tx, ty, vx, vy = z["train_x"], z["train_y"].astype(np.float64), z["val_x"], z["val_y"].astype(np.float64)
     out: dict[str, Any] = {"features_set": "blockers" if names == feature_names(True) else "named",
                            "train_labels": len(ty), "val_labels": len(vy), "val_invalid": float(vy.mean()),
@@ -518,11 +524,8 @@ def channels_run(sets: Sets, features: pathlib.Path, out: pathlib.Path, checkpoi
     observation plus `feature_channels` (normalised with the ``features`` file's training features), saved to
     ``out`` (``.pt``, with ``info`` about the data); its AUC on the validation split and the test set, with the
     offline check of ``checkpoint``'s choice on both."""
-    z = np.load(features, allow_pickle=False)
-    names = tuple(str(n) for n in z["names"])
+    z, names = load_features(features)
     blockers = names == feature_names(True)
-    if names not in (feature_names(False), feature_names(True)):
-        raise ValueError(f"{features} holds other features ({list(names)}); rebuild it with `features`")
     mean, std = z["train_x"].mean(axis=0), z["train_x"].std(axis=0)
     val = sets.val
     wide_train, wide_val = with_channels(sets.train, mean, std, blockers), with_channels(val, mean, std, blockers)
@@ -603,10 +606,7 @@ def export(models: pathlib.Path, name: str, features: pathlib.Path, threshold: f
            out: pathlib.Path) -> GeometryRisk:
     """The ``name`` model of a `fit` run's ``.models.pt`` as a `GeometryRisk` at ``threshold``, saved to ``out``
     (the feature set read from the `fit` run's ``features`` file)."""
-    z = np.load(features, allow_pickle=False)
-    names = tuple(str(n) for n in z["names"])
-    if names not in (feature_names(False), feature_names(True)):
-        raise ValueError(f"{features} holds other features ({list(names)}); rebuild it with `features`")
+    _, names = load_features(features)
     weights = th.load(models, map_location="cpu", weights_only=True)
     if name not in weights:
         raise ValueError(f"{models} holds the models {sorted(weights)}, not {name!r}")
