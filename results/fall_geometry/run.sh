@@ -74,6 +74,9 @@ python -m research.evaluate --policies "$lb" "$out/filter/p_s_geo10.zip+geometry
 l=p_s_geo10+geometry-filter+loop-breaker
 python -m shelf_env.evaluation.compare "$out/heldout_lb" --pair $l "$ref" --pair $l p_s_geo10+geometry-filter \
     --pair $l h-a --pair $l h-d --pair $l h-a+loop-breaker --pair $l h-d+loop-breaker --out "$out/heldout_lb_pairs.md"
+# 8-10. (the seventeenth session) the filter + loop breaker on the whole §V grid, open loop and closed loop + safe
+#    picks, and the shipped P+S with the loop breaker alone: sv.sh
+bash "$out/sv.sh"
 python - "$out" <<'PY'
 import json, sys
 for name in ("fit", "fit_blockers"):
@@ -89,4 +92,5 @@ c = json.load(open(f"{sys.argv[1]}/channels.json"))
 print(f"channels: validation {c['val_auc']:.3f} (epoch {c['best_epoch']}), test {c['test_auc']:.3f}; the fall model "
       f"{c['val_fcn_auc']:.3f} / {c['test_fcn_auc']:.3f}; candidate on validation {c['val_offline']['candidate']}")
 PY
-cat "$out/val90_pairs.md" "$out/heldout_pairs.md" "$out/val90_lb_pairs.md" "$out/heldout_lb_pairs.md"
+cat "$out/val90_pairs.md" "$out/heldout_pairs.md" "$out/val90_lb_pairs.md" "$out/heldout_lb_pairs.md" \
+    "$out/sv_open/paired.md" "$out/heldout_plb_pairs.md" "$out/sv_closed_safe/paired.md"
