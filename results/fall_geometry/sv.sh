@@ -4,10 +4,10 @@
 #   8. open loop on issue 10's whole grid (N = 3..14, 30 runs x seeds 0-2): the candidate's cells at N = 5, 8, 11
 #      copied from heldout_lb/, the rest played; the shipped P+S, S, H-d, H-a from results/models_v3/open
 #      -> sv_open/ (report.md, paired.md)
-#   9. the shipped P+S with the loop breaker alone on the held-out cells at N = 5, 8, 11 -> heldout_plb/,
-#      heldout_plb_pairs.md
-#  10. closed loop + safe picks (seed 0, N = 3..14); the other policies from results/models_v3/closed_safe
+#   9. closed loop + safe picks (seed 0, N = 3..14); the other policies from results/models_v3/closed_safe
 #      -> sv_closed_safe/ (report.md, paired.md)
+#  10. the shipped P+S with the loop breaker alone on the held-out cells at N = 5, 8, 11 -> heldout_plb/,
+#      heldout_plb_pairs.md
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 out=results/fall_geometry
@@ -26,12 +26,6 @@ python -m research.evaluate --policies "$lb" "$ship" examples/pretrained/s.zip h
 python -m shelf_env.evaluation.report "$out/sv_open" --learned $l --pick-only s --heuristics h-d h-a
 python -m shelf_env.evaluation.compare "$out/sv_open" --pair $l $ref --pair $l h-d --pair $l h-a \
     --out "$out/sv_open/paired.md"
-held=(--ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out "$out/heldout_plb")
-python -m research.evaluate --policies "$ship+loop-breaker" "${held[@]}" "${w[@]}"
-python -m research.evaluate --policies "$lb" "$ship" "${held[@]}" "${w[@]}" --reuse-cells "$out/heldout_lb"
-python -m research.evaluate --policies "$ship+loop-breaker" "$lb" "$ship" "${held[@]}" --summarize-only
-python -m shelf_env.evaluation.compare "$out/heldout_plb" --pair $l "$ref+loop-breaker" \
-    --pair "$ref+loop-breaker" $ref --out "$out/heldout_plb_pairs.md"
 loop=(--closed-loop '{}' --safe-picks --seeds 1 --out "$out/sv_closed_safe")
 python -m research.evaluate --policies "$lb" "${grid[@]}" "${loop[@]}" "${w[@]}"
 python -m research.evaluate --policies "$ship" h-d h-a "${grid[@]}" "${loop[@]}" "${w[@]}" \
@@ -40,3 +34,9 @@ python -m research.evaluate --policies "$lb" "$ship" h-d h-a "${grid[@]}" "${loo
 python -m shelf_env.evaluation.report "$out/sv_closed_safe" --learned $l --heuristics h-d h-a
 python -m shelf_env.evaluation.compare "$out/sv_closed_safe" --pair $l $ref --pair $l h-d --pair $l h-a \
     --out "$out/sv_closed_safe/paired.md"
+held=(--ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out "$out/heldout_plb")
+python -m research.evaluate --policies "$ship+loop-breaker" "${held[@]}" "${w[@]}"
+python -m research.evaluate --policies "$lb" "$ship" "${held[@]}" "${w[@]}" --reuse-cells "$out/heldout_lb"
+python -m research.evaluate --policies "$ship+loop-breaker" "$lb" "$ship" "${held[@]}" --summarize-only
+python -m shelf_env.evaluation.compare "$out/heldout_plb" --pair $l "$ref+loop-breaker" \
+    --pair "$ref+loop-breaker" $ref --out "$out/heldout_plb_pairs.md"
