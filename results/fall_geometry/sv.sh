@@ -8,6 +8,8 @@
 #      -> sv_closed_safe/ (report.md, paired.md)
 #  10. the shipped P+S with the loop breaker alone on the held-out cells at N = 5, 8, 11 -> heldout_plb/,
 #      heldout_plb_pairs.md
+#  11. the filter + loop breaker's greedy fall rate per action at N = 8 (the first 30 held-out scenes, every decision
+#      probed in a forked copy) -> falls30_lb.json
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 out=results/fall_geometry
@@ -40,3 +42,5 @@ python -m research.evaluate --policies "$lb" "$ship" "${held[@]}" "${w[@]}" --re
 python -m research.evaluate --policies "$ship+loop-breaker" "$lb" "$ship" "${held[@]}" --summarize-only
 python -m shelf_env.evaluation.compare "$out/heldout_plb" --pair $l "$ref+loop-breaker" \
     --pair "$ref+loop-breaker" $ref --out "$out/heldout_plb_pairs.md"
+[ -f "$out/falls30_lb.json" ] || python -c "import research.fall_geometry, sys; from shelf_env.evaluation.falls import \
+main; sys.exit(main(sys.argv[1:]))" "$lb" --ns 8 --runs 30 --seed 0 --out "$out/falls30_lb.json"
