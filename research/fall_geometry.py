@@ -1,21 +1,21 @@
 """Named fall geometry against the learned fall model (docs/experiments/fall-geometry.md).
 
-Per labelled pick of the teacher dataset, a few quantities a person would name, read from the stored
-camera observation only (class colours, the height channel, grey cells, region tints; objects as the
-heuristics see them, `object_blobs`): the pick cell on its object, the object's size and height, the
-carry corridor to the opening (`shelf_env.conditions.safe_picks`'s geometry), its neighbours, the
-occluded cells around it, its class's region and the scene (`FEATURES`); with ``blockers`` also the
-objects the carry would hit (`BLOCKER_FEATURES`). Commands:
+Per labelled pick of the teacher dataset, the quantities of `shelf_env.fall_filter.geometry_features`, read
+from the stored camera observation only: the pick cell on its object, the object's size and height, the
+carry corridor to the opening (`shelf_env.conditions.safe_picks`'s geometry), its neighbours, the occluded
+cells around it, its class's region and the scene (`FEATURES`); with ``blockers`` also the objects the carry
+would hit (`BLOCKER_FEATURES`). The features, the model and the filter are the product's
+(`shelf_env.fall_filter`); this module fits and measures them. Commands:
 
 - `features`: the features of the fall model's split (`research.fall_risk.load_splits`) and, with
   ``--fresh``, of a test set of shards no fall model read -> one ``.npz``;
-- `fit`: a logistic regression and an MLP on the training features, each feature's own AUC, the
-  from-scratch fall model's risk joined to the features (two-fold by scene, `twofold`) and averaged with
+- `fit`: a logistic regression and an MLP (`FeatureModel`) on the training features, each feature's own AUC,
+  the from-scratch fall model's risk joined to the features (two-fold by scene, `twofold`) and averaged with
   the MLP (`ensemble`), on validation and test -> a JSON report (``--checkpoint``: the offline check of
   `research.fall_risk.penalty_report` with each risk);
 - `channels`: the fall model's recipe with the features as more input channels (`feature_channels`);
 - `export`: a fitted model as a per-cell risk (`GeometryRisk`) beside a checkpoint, which
-  ``<zip>+geometry-filter`` plays under `research.fall_risk.FallFilter` (``python -m research.evaluate``).
+  ``<zip>+geometry-filter`` plays under `shelf_env.fall_filter.FallFilter` (registered by `shelf_env.policies`).
 
 Measured: round two's MLP ranks the falls at AUC 0.902 on validation and 0.926 on the test set (the fall
 model 0.866 / 0.897); as a mask at 0.1 on the shipped P+S it sorted 113 of the 270 validation scenes against
@@ -27,192 +27,22 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
 import pathlib
 import sys
 from typing import Any
 
-import cv2
-import gymnasium as gym
 import numpy as np
 import torch as th
 
 from research import fall_risk
-from shelf_env import params, policies
-from shelf_env.baselines.heuristics import object_blobs, object_classes
-from shelf_env.camera.heightmap import OCCLUDED_RGB, REGION_RGB, observed_height
-from shelf_env.conditions.safe_picks import Z_CARRY
+from shelf_env.fall_filter import (
+    FEATURES,
+    FeatureModel,
+    GeometryRisk,
+    feature_names,
+    geometry_features,
+)
 from shelf_env.files import write_atomically, write_json_atomically
-
-#: The features, in column order (heights in metres, distances in cells of the observation).
-FEATURES = (
-    "on_object",  # the pick cell is on a visible object
-    "cell_height",  # the pick cell's observed height
-    "offset_rows",  # (pick row - object's mean row) / its rows' extent (> 0: towards the front)
-    "offset_cols",  # |pick col - object's mean col| / its columns' extent
-    "edge_distance",  # Chebyshev distance from the pick cell to the nearest cell off the object
-    "object_max_height", "object_mean_height", "object_area", "object_rows", "object_cols",
-    "object_back_row", "object_front_row",  # rows from the back wall; the front row's distance to the opening
-    "wall_distance",  # to the nearer side wall
-    "carry_margin_05", "carry_margin_15", "carry_margin_30",  # Z_CARRY - cell height - tallest in the corridor
-    "corridor_cells",  # other objects' cells in the 0.5 cm corridor
-    "nearest_other",  # distance to the nearest other object's cell
-    "tallest_near",  # tallest other object within 3 cm of the object
-    "grey_near",  # occluded cells within 1 cm of the object
-    "grey_behind",  # occluded cells in the object's columns behind it
-    "in_region",  # the object's centre is in its class's region (sorted)
-    "region_free",  # share of the class region's cells that are free (its tint shows)
-    "region_tallest",  # tallest object in the class region
-    "scene_objects",  # visible objects
-    "scene_grey",  # share of the map's cells that are occluded
-)
-#: Round two (``blockers=True``, appended): the *blockers* of a picked object, the other objects with cells in its
-#: straight corridor to the opening (its columns, from its back row) whose top is above the carried object's bottom
-#: (``Z_CARRY`` - its highest cell), and the front-most of them (zeros where none).
-BLOCKER_FEATURES = (
-    "blockers",  # how many
-    "blocker_gap",  # rows from the object's front row to the nearest blocker cell in the corridor (0: overlapping)
-    "blocker_to_opening",  # the front-most blocker's distance to the opening (rows)
-    "blocker_rows", "blocker_cols", "blocker_area",  # the front-most blocker's extent and area
-    "blocker_in_corridor",  # share of the front-most blocker's columns inside the corridor
-    "blockers_area",  # all blockers' area
-    "blocker_stopped",  # another object stands between the front-most blocker and the opening, in its columns
-    "carry_bottom",  # Z_CARRY - the object's highest cell: the carried object's bottom
-)
-#: Widths (metres) the carry corridor is widened by on each side, for ``carry_margin_*``, rounded to cells as
-#: `shelf_env.conditions.safe_picks` rounds its ``side``: at the dataset's 1 cm cells 0, 2 and 3 cells.
-CORRIDOR_SIDES = (0.005, 0.015, 0.03)
-NEAR_M, GREY_NEAR_M, EDGE_CAP = 0.03, 0.01, 10
-
-
-def _dilate(mask: np.ndarray, cells: int) -> np.ndarray:
-    """``mask`` grown by ``cells`` in the Chebyshev sense."""
-    if cells <= 0:
-        return mask.copy()
-    kernel = np.ones((2 * cells + 1, 2 * cells + 1), np.uint8)
-    return cv2.dilate(mask.astype(np.uint8), kernel).astype(bool)
-
-
-def _tallest_in(height: np.ndarray, where: np.ndarray) -> float:
-    return float(height[where].max(initial=0.0))
-
-
-def feature_names(blockers: bool = False) -> tuple[str, ...]:
-    """The columns of `geometry_features`: round one's, and with ``blockers`` round two's after them."""
-    return FEATURES + BLOCKER_FEATURES if blockers else FEATURES
-
-
-def blocker_features(blob: np.ndarray, height: np.ndarray, b: int) -> dict[str, float]:
-    """`BLOCKER_FEATURES` of the object ``b`` (a blob of ``blob``), from the blobs and observed heights."""
-    rows = blob.shape[0]
-    own = blob == b
-    rr, cc = np.nonzero(own)
-    r0, r1, c0, c1 = int(rr.min()), int(rr.max()), int(cc.min()), int(cc.max())
-    bottom = Z_CARRY - float(height[own].max())
-    corridor = np.zeros_like(own)
-    corridor[r0:, c0:c1 + 1] = True
-    hit = corridor & (blob >= 0) & ~own & (height > bottom)
-    out = dict.fromkeys(BLOCKER_FEATURES, 0.0)
-    out["carry_bottom"] = bottom
-    ids = np.unique(blob[hit])
-    if not len(ids):
-        return out
-    hit_rows = np.nonzero(hit)[0]
-    fronts = {int(k): int(np.nonzero(blob == k)[0].max()) for k in ids}
-    front = max(fronts, key=lambda k: fronts[k])
-    fr_rows, fr_cols = np.nonzero(blob == front)
-    cols = np.unique(fr_cols)
-    ahead = np.zeros_like(own)
-    ahead[fronts[front] + 1:, cols] = True
-    out.update({
-        "blockers": float(len(ids)), "blocker_gap": float(max(int(hit_rows.min()) - r1 - 1, 0)),
-        "blocker_to_opening": float(rows - 1 - fronts[front]),
-        "blocker_rows": float(fr_rows.max() - fr_rows.min() + 1), "blocker_cols": float(cols.max() - cols.min() + 1),
-        "blocker_area": float(len(fr_rows)), "blocker_in_corridor": float(((cols >= c0) & (cols <= c1)).mean()),
-        "blockers_area": float(np.isin(blob, ids).sum()),
-        "blocker_stopped": float((ahead & (blob >= 0) & (blob != front) & ~own).any())})
-    return out
-
-
-def geometry_features(obs: np.ndarray, cells: np.ndarray, blockers: bool = False) -> np.ndarray:
-    """(K, len(feature_names(blockers))) float32: the features of the picks at flat cells ``cells`` of one
-    observation ``obs`` (4, H, W). A pick on no object gets ``on_object`` 0, its cell's height and the
-    scene's features, and zeros elsewhere."""
-    obs = np.asarray(obs)
-    if obs.ndim != 3 or obs.shape[0] != 4:
-        raise ValueError(f"need one (4, H, W) observation, got shape {obs.shape}")
-    rows, cols = obs.shape[1:]
-    cells = np.asarray(cells, np.int64)
-    if cells.size and (cells.min() < 0 or cells.max() >= rows * cols):
-        raise ValueError(f"cells must lie in 0..{rows * cols - 1}, got {cells.min()}..{cells.max()}")
-    pixel = params.CABINET_DEPTH / rows
-    height = observed_height(obs)
-    blob, klass = object_blobs(obs), object_classes(obs)
-    rgb = np.moveaxis(obs[:3], 0, -1)
-    grey = (rgb == OCCLUDED_RGB).all(axis=-1)
-    objects = blob >= 0
-    near, grey_near = int(round(NEAR_M / pixel)), max(int(round(GREY_NEAR_M / pixel)), 1)
-    sides = [int(round(s / pixel)) for s in CORRIDOR_SIDES]
-    regions = []
-    for colour in REGION_RGB:
-        rr, cc = np.nonzero((rgb == colour).all(axis=-1))
-        regions.append((rr.min(), rr.max(), cc.min(), cc.max()) if rr.size else None)
-    scene = (float(blob.max() + 1), float(grey.mean()))
-    names = feature_names(blockers)
-    out = np.zeros((len(cells), len(names)), np.float32)
-    out[:, FEATURES.index("cell_height")] = height.reshape(-1)[cells]
-    out[:, FEATURES.index("scene_objects")], out[:, FEATURES.index("scene_grey")] = scene
-    own_of = blob.reshape(-1)[cells]
-    for b in np.unique(own_of[own_of >= 0]):
-        own = blob == b
-        rr, cc = np.nonzero(own)
-        r0, r1, c0, c1 = int(rr.min()), int(rr.max()), int(cc.min()), int(cc.max())
-        others = objects & ~own
-        other_height = np.where(others, height, 0.0)
-        tallest = [float(other_height[r0:, max(c0 - s, 0):c1 + s + 1].max(initial=0.0)) for s in sides]
-        corridor = int(others[r0:, max(c0 - sides[0], 0):c1 + sides[0] + 1].sum())
-        if others.any():
-            to_other = cv2.distanceTransform((~others).astype(np.uint8), cv2.DIST_C, 3)
-            nearest = float(to_other[own].min())
-        else:
-            nearest = float(max(rows, cols))
-        grown = _dilate(own, near)
-        halo = _dilate(own, grey_near) & ~own
-        behind = np.zeros_like(own)
-        behind[:r0, c0:c1 + 1] = True
-        k = int(klass[rr[0], cc[0]])
-        rect = regions[k]
-        if rect is None:
-            in_region, free, region_tallest = 0.0, 0.0, 0.0
-        else:
-            a0, a1, b0, b1 = rect
-            in_region = float(a0 <= rr.mean() <= a1 and b0 <= cc.mean() <= b1)
-            box = (slice(a0, a1 + 1), slice(b0, b1 + 1))
-            free = float((rgb[box] == REGION_RGB[k]).all(axis=-1).mean())
-            region_tallest = _tallest_in(height[box], objects[box])
-        edge = cv2.distanceTransform(np.pad(own, 1).astype(np.uint8), cv2.DIST_C, 3)[1:-1, 1:-1]
-        mine = np.flatnonzero(own_of == b)
-        r, c = cells[mine] // cols, cells[mine] % cols
-        h_cell = height[r, c]
-        per_object = {
-            "on_object": 1.0, "object_max_height": float(height[own].max()),
-            "object_mean_height": float(height[own].mean()), "object_area": float(own.sum()),
-            "object_rows": float(r1 - r0 + 1), "object_cols": float(c1 - c0 + 1), "object_back_row": float(r0),
-            "object_front_row": float(rows - 1 - r1), "wall_distance": float(min(c0, cols - 1 - c1)),
-            "corridor_cells": float(corridor), "nearest_other": nearest,
-            "tallest_near": _tallest_in(height, grown & others), "grey_near": float((halo & grey).sum()),
-            "grey_behind": float((behind & grey).sum()), "in_region": in_region, "region_free": free,
-            "region_tallest": region_tallest}
-        if blockers:
-            per_object |= blocker_features(blob, height, int(b))
-        for name, value in per_object.items():
-            out[mine, names.index(name)] = value
-        out[mine, FEATURES.index("offset_rows")] = (r - rr.mean()) / (r1 - r0 + 1)
-        out[mine, FEATURES.index("offset_cols")] = np.abs(c - cc.mean()) / (c1 - c0 + 1)
-        out[mine, FEATURES.index("edge_distance")] = np.minimum(edge[r, c], EDGE_CAP)
-        for name, top in zip(("carry_margin_05", "carry_margin_15", "carry_margin_30"), tallest):
-            out[mine, FEATURES.index(name)] = Z_CARRY - h_cell - top
-    return out
 
 
 def split_features(split: fall_risk.Split, blockers: bool = False) -> np.ndarray:
@@ -297,30 +127,6 @@ def load_features(path: pathlib.Path) -> tuple[Any, tuple[str, ...]]:
     if names not in (feature_names(False), feature_names(True)):
         raise ValueError(f"{path} holds other features ({list(names)}); rebuild it with `features`")
     return z, names
-
-
-class FeatureModel(th.nn.Module):
-    """Logistic regression (``hidden`` 0) or an MLP (two ``hidden``-wide ReLU layers) on standardised
-    features; ``mean`` and ``std`` are the training features'."""
-
-    mean: th.Tensor
-    std: th.Tensor
-
-    def __init__(self, mean: np.ndarray, std: np.ndarray, hidden: int = 64) -> None:
-        super().__init__()
-        self.register_buffer("mean", th.as_tensor(mean, dtype=th.float32))
-        self.register_buffer("std", th.as_tensor(np.where(std > 0, std, 1.0), dtype=th.float32))
-        n, self.hidden = len(mean), int(hidden)
-        self.net = (th.nn.Linear(n, 1) if hidden == 0 else
-                    th.nn.Sequential(th.nn.Linear(n, hidden), th.nn.ReLU(), th.nn.Linear(hidden, hidden),
-                                     th.nn.ReLU(), th.nn.Linear(hidden, 1)))
-
-    def forward(self, x: th.Tensor) -> th.Tensor:
-        return self.net((x - self.mean) / self.std).squeeze(-1)
-
-    def risk(self, x: np.ndarray) -> np.ndarray:
-        with th.no_grad():
-            return th.sigmoid(self(th.as_tensor(x, dtype=th.float32))).numpy()
 
 
 def fit(train_x: np.ndarray, train_y: np.ndarray, val_x: np.ndarray, val_y: np.ndarray, hidden: int = 64,
@@ -551,57 +357,6 @@ def channels_run(sets: Sets, features: pathlib.Path, out: pathlib.Path, checkpoi
     return result
 
 
-class GeometryRisk:
-    """A per-cell fall risk from a `FeatureModel`: at every object cell, the model's probability on that
-    cell's `geometry_features`; 0 off objects (a pick there holds nothing). Duck-types
-    `research.fall_risk.FallRiskModel` for `research.fall_risk.FallFilter` (``risk``, ``threshold``, ``info``)."""
-
-    def __init__(self, model: FeatureModel, blockers: bool, threshold: float, obs_shape: tuple[int, ...]) -> None:
-        if not 0 < threshold <= 1:
-            raise ValueError(f"threshold must be in (0, 1], got {threshold}")
-        self.model, self.blockers, self.threshold = model, bool(blockers), float(threshold)
-        self.info: dict[str, Any] = {"obs_shape": list(obs_shape)}
-
-    def risk(self, obs: np.ndarray) -> np.ndarray:
-        """(H, W) probability that a pick at each cell ends the episode invalid."""
-        obs = np.asarray(obs)
-        rows, cols = obs.shape[1:]
-        on = np.flatnonzero(object_blobs(obs).reshape(-1) >= 0)
-        out = np.zeros(rows * cols)
-        if len(on):
-            out[on] = self.model.risk(geometry_features(obs, on, self.blockers))
-        return out.reshape(rows, cols)
-
-    def save(self, path: str | pathlib.Path) -> None:
-        """Weights and settings in one torch file, written atomically."""
-        payload = {"state_dict": self.model.state_dict(), "features": len(self.model.mean),
-                   "hidden": self.hidden, "blockers": self.blockers, "threshold": self.threshold,
-                   "obs_shape": self.info["obs_shape"]}
-        write_atomically(path, lambda tmp: th.save(payload, tmp))
-
-    @property
-    def hidden(self) -> int:
-        return self.model.hidden
-
-    @classmethod
-    def load(cls, path: str | pathlib.Path) -> GeometryRisk:
-        path = pathlib.Path(path)
-        if not path.is_file():
-            raise ValueError(f"geometry risk model {str(path)!r} does not exist "
-                             "(python -m research.fall_geometry export makes one)")
-        try:
-            payload = th.load(path, map_location="cpu", weights_only=True)
-            n = int(payload["features"])
-            model = FeatureModel(np.zeros(n), np.ones(n), int(payload["hidden"]))
-            model.load_state_dict(payload["state_dict"])
-            model.eval()
-            return cls(model, bool(payload["blockers"]), float(payload["threshold"]), tuple(payload["obs_shape"]))
-        except ValueError:
-            raise
-        except Exception as err:  # noqa: BLE001  (any failure to read is a bad file)
-            raise ValueError(f"{path} is not a readable geometry risk model: {err}") from err
-
-
 def export(models: pathlib.Path, name: str, features: pathlib.Path, threshold: float, obs_shape: tuple[int, ...],
            out: pathlib.Path) -> GeometryRisk:
     """The ``name`` model of a `fit` run's ``.models.pt`` as a `GeometryRisk` at ``threshold``, saved to ``out``
@@ -618,35 +373,6 @@ def export(models: pathlib.Path, name: str, features: pathlib.Path, threshold: f
     risk = GeometryRisk(model, names == feature_names(True), threshold, obs_shape)
     risk.save(out)
     return risk
-
-
-#: Appended to a checkpoint's path: play it under `research.fall_risk.FallFilter` with `geometry_risk_path`'s model.
-GEOMETRY_FILTER = "+geometry-filter"
-
-
-def geometry_risk_path(checkpoint: str | os.PathLike) -> pathlib.Path:
-    """The `GeometryRisk` a ``<checkpoint>+geometry-filter`` policy uses: ``<stem>.geometry_risk.pt`` beside it."""
-    path = pathlib.Path(checkpoint)
-    return path.with_name(path.stem + ".geometry_risk.pt")
-
-
-def _check_geometry(base: str) -> None:
-    if base in policies.POLICIES:
-        raise ValueError(f"{GEOMETRY_FILTER} filters a checkpoint's picks with the geometry risk saved beside it; "
-                         f"{base!r} is not a checkpoint")
-    if not geometry_risk_path(base).is_file():
-        raise ValueError(f"policy {base}{GEOMETRY_FILTER}: no geometry risk model at {geometry_risk_path(base)} "
-                         "(python -m research.fall_geometry export makes one)")
-
-
-def _geometry_filtered(agent: Any, env: gym.Env, base: str) -> fall_risk.FallFilter:
-    unwrapped: Any = env.unwrapped
-    risk: Any = GeometryRisk.load(geometry_risk_path(base))
-    return fall_risk.FallFilter(agent, risk, unwrapped.map_names, unwrapped.rows, unwrapped.cols)
-
-
-policies.register_wrapper(GEOMETRY_FILTER, _geometry_filtered, check=_check_geometry,
-                          files=lambda base: [geometry_risk_path(base)])
 
 
 def main(argv: list[str] | None = None) -> int:

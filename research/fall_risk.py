@@ -65,6 +65,7 @@ import torch.nn.functional as F
 from sb3_pixeldqn.networks import DEFAULT_WIDTHS, ResidualFCN
 from shelf_env import params, policies
 from shelf_env.baselines.heuristics import ObservationView, object_blobs
+from shelf_env.fall_filter import FallFilter
 from shelf_env.files import write_atomically, write_json_atomically
 from shelf_env.privileged.lookahead import LookaheadDistance, probe_outcome
 from shelf_env.symmetry import PermuteClasses
@@ -786,53 +787,6 @@ def rethreshold(model_path: pathlib.Path, data: pathlib.Path, recall: float, out
             "rethresholded_from": str(model_path)}
     risk.save(out, info)
     return info
-
-
-class FallFilter:
-    """Wrap ``policy`` (SB3's ``predict`` with ``action_masks``): pick cells whose predicted fall risk
-    is at or over ``risk.threshold`` are masked out before the policy chooses (see the module
-    docstring). Where that leaves no allowed action, the policy chooses as if unfiltered. Counts in
-    ``stats``: ``masked`` (decisions where at least one allowed pick cell was masked out) and
-    ``unfiltered`` (decisions where nothing allowed was left, so the filter stood aside)."""
-
-    def __init__(self, policy: Any, risk: FallRiskModel, map_names: tuple[str, ...], rows: int, cols: int) -> None:
-        self.policy, self.risk = policy, risk
-        self.observation_space, self.action_space = policy.observation_space, policy.action_space
-        if "pick" not in map_names:
-            raise ValueError(f"FallFilter needs a pick map; the policy's maps are {map_names}")
-        self.pick, self.n_maps, self.rows, self.cols = map_names.index("pick"), len(map_names), rows, cols
-        if int(self.action_space.n) != self.n_maps * rows * cols:
-            raise ValueError(f"action space {self.action_space} is not {self.n_maps} maps of {rows}x{cols}")
-        trained_on = getattr(risk, "info", {}).get("obs_shape")
-        if trained_on is not None and tuple(trained_on) != tuple(self.observation_space.shape):
-            raise ValueError(f"the fall-risk model was trained on observations of shape {tuple(trained_on)}; the "
-                             f"policy's are {tuple(self.observation_space.shape)} (another cell size or layout)")
-        self.acts_masked = bool(getattr(policy, "acts_masked", True))
-        self.stats = {"masked": 0, "unfiltered": 0}
-
-    def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
-                deterministic: bool = True, action_masks: np.ndarray | None = None) -> tuple[np.ndarray, Any]:
-        obs = np.asarray(observation)
-        if obs.shape != self.observation_space.shape:
-            raise ValueError(f"FallFilter acts on one observation of shape {self.observation_space.shape}, "
-                             f"got {obs.shape}")
-        allowed = (np.ones(int(self.action_space.n), bool) if action_masks is None
-                   else np.asarray(action_masks, bool).reshape(-1).copy())
-        maps = allowed.reshape(self.n_maps, self.rows, self.cols)
-        risky = self.risk.risk(obs) >= self.risk.threshold
-        if action_masks is None and not (maps[self.pick] & ~risky).any():
-            # a policy that gets no env masks (a heuristic) picks among object cells by itself: with
-            # every cell risky there is nothing to restrict it to
-            self.stats["unfiltered"] += 1
-            return self.policy.predict(obs, state=state, deterministic=deterministic)
-        filtered = allowed.copy()
-        filtered.reshape(self.n_maps, self.rows, self.cols)[self.pick] &= ~risky
-        self.stats["masked"] += int((maps[self.pick] & risky).any())
-        if not filtered.any():
-            self.stats["unfiltered"] += 1
-            filtered = allowed
-        action, state = self.policy.predict(obs, state=state, deterministic=deterministic, action_masks=filtered)
-        return action, state
 
 
 #: Appended to a checkpoint's path: play it under `FallFilter` with the fall-risk model of `fall_filter_path`.

@@ -11,7 +11,8 @@ results with it get cells and labels of their own (`policy_label`: ``p_s+loop-br
 evaluated side by side. A ``NAME.ensemble.json`` file (`write_ensemble`) names two or more checkpoints that act
 as one `sb3_pixeldqn.ensemble.QEnsemble` (greedy on the mean of their Q-maps); its label is ``NAME``.
 
-The product registers its own names and the loop breaker here; an experiment registers its own
+The product registers its own names, the loop breaker and the geometry pick filter (``+geometry-filter``,
+`shelf_env.fall_filter`) here; an experiment registers its own
 wrappers when it is imported (``research/fall_risk.py`` registers ``+fall-filter``), and the product
 never imports an experiment. `check_policy` validates a name before any work starts.
 """
@@ -32,6 +33,7 @@ import numpy as np
 from sb3_pixeldqn.loop_breaker import LoopBreaker
 from shelf_env import params
 from shelf_env.baselines.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
+from shelf_env.fall_filter import GEOMETRY_FILTER, FallFilter, GeometryRisk, geometry_risk_path
 from shelf_env.files import write_json_atomically
 from shelf_env.privileged.lookahead import LookaheadAccessibility, LookaheadDistance
 from shelf_env.privileged.planning import PlanningTeacher
@@ -304,6 +306,22 @@ def masked_greedy(model: Any, env: gym.Env, obs: Any) -> int:
 #: The loop breaker's suffix (`sb3_pixeldqn.LoopBreaker` with its defaults).
 LOOP_BREAKER = "+loop-breaker"
 
+
+def _check_geometry(base: str) -> None:
+    if base in POLICIES:
+        raise ValueError(f"{GEOMETRY_FILTER} filters a checkpoint's picks with the geometry risk saved beside it; "
+                         f"{base!r} is not a checkpoint")
+    if not geometry_risk_path(base).is_file():
+        raise ValueError(f"policy {base}{GEOMETRY_FILTER}: no geometry risk model at {geometry_risk_path(base)} "
+                         "(python -m research.fall_geometry export, in the repository, makes one)")
+
+
+def _geometry_filtered(agent: Any, env: gym.Env, base: str) -> FallFilter:
+    unwrapped: Any = env.unwrapped
+    return FallFilter(agent, GeometryRisk.load(geometry_risk_path(base)), unwrapped.map_names, unwrapped.rows,
+                      unwrapped.cols)
+
+
 register_policy("h-d", lambda env, seed: DistanceHeuristic(env))
 register_policy("h-a", lambda env, seed: AccessibilityHeuristic(env))
 # privileged diagnostics (they read the simulator), not baselines: shelf_env.privileged.lookahead
@@ -312,3 +330,6 @@ register_policy("h-a-lookahead", lambda env, seed: LookaheadAccessibility(env))
 register_policy("h-d-planner", lambda env, seed: PlanningTeacher(env))
 register_policy("random", lambda env, seed: RandomPolicy(env, seed=seed))
 register_wrapper(LOOP_BREAKER, lambda agent, env, base: LoopBreaker(agent))
+# a camera-only pick filter (shelf_env.fall_filter): the shipped P+S plays under it, then the loop breaker
+register_wrapper(GEOMETRY_FILTER, _geometry_filtered, check=_check_geometry,
+                 files=lambda base: [geometry_risk_path(base)])

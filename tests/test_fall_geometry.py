@@ -1,5 +1,6 @@
-"""Named fall geometry (research.fall_geometry): each feature as the crafted scene's geometry says, and the
-command line from a teacher dataset to the report that learns a corridor rule."""
+"""Named fall geometry (research.fall_geometry): the command line from a teacher dataset to the report that
+learns a corridor rule, the feature channels, and the export of a fit as the product's geometry risk (the
+features themselves: tests/test_fall_filter.py)."""
 
 import json
 
@@ -10,88 +11,11 @@ import pytest
 from research import fall_geometry as fg
 from research import fall_risk as fr
 from sb3_pixeldqn import PixelDoubleDQN
-from shelf_env import params
-from shelf_env.camera.heightmap import CLASS_RGB, OCCLUDED_RGB, REGION_RGB, observed_height
+from shelf_env import fall_filter as ff
+from shelf_env.camera.heightmap import CLASS_RGB
 from shelf_env.conditions.safe_picks import Z_CARRY
-
-
-def paint(obs, rows, cols, rgb, height=None):
-    obs[:3, rows, cols] = np.asarray(rgb, np.uint8)[:, None, None]
-    if height is not None:
-        obs[3, rows, cols] = int(round(height / params.CABINET_HEIGHT * 255))
-
-
-def crafted():
-    """40 x 60 cells (1 cm): class 0's region at the front left; object A (class 0, 10 cm tall) at the back with
-    grey cells behind it, object B (class 1, 12 cm) in front of it, overlapping its columns."""
-    obs = np.full((4, 40, 60), 255, np.uint8)
-    obs[3] = 0
-    paint(obs, slice(30, 40), slice(0, 20), REGION_RGB[0])
-    paint(obs, slice(5, 10), slice(10, 15), CLASS_RGB[0], 0.10)
-    paint(obs, slice(20, 23), slice(12, 17), CLASS_RGB[1], 0.12)
-    paint(obs, slice(0, 5), slice(10, 15), OCCLUDED_RGB)
-    return obs
-
-
-def test_each_feature_is_the_crafted_scene_s_geometry():
-    obs = crafted()
-    height = observed_height(obs)
-    a, b = height[7, 12], height[21, 14]
-    cells = np.array([7 * 60 + 12, 21 * 60 + 14, 35 * 60 + 50, 5 * 60 + 10])
-    x = fg.geometry_features(obs, cells)
-    assert x.shape == (4, len(fg.FEATURES)) and x.dtype == np.float32
-    f = [dict(zip(fg.FEATURES, row)) for row in x.astype(float)]
-    first = f[0]
-    assert first["on_object"] == 1 and first["cell_height"] == pytest.approx(a)
-    assert first["object_area"] == 25 and first["object_rows"] == 5 and first["object_cols"] == 5
-    assert first["object_back_row"] == 5 and first["object_front_row"] == 30 and first["wall_distance"] == 10
-    assert first["offset_rows"] == 0 and first["offset_cols"] == 0 and first["edge_distance"] == 3
-    # B stands in A's corridor to the opening: 3 rows x its 3 columns that A's columns cover
-    assert first["corridor_cells"] == 9
-    for name in ("carry_margin_05", "carry_margin_15", "carry_margin_30"):
-        assert first[name] == pytest.approx(Z_CARRY - a - b, abs=1e-6)
-    assert first["nearest_other"] == 11 and first["tallest_near"] == 0  # B is 11 cells away, beyond 3 cm
-    assert first["grey_behind"] == 25 and first["grey_near"] == 5  # the grey row next to A's back edge
-    assert first["in_region"] == 0 and first["region_free"] == 1 and first["region_tallest"] == 0
-    assert first["scene_objects"] == 2 and first["scene_grey"] == pytest.approx(25 / 2400)
-    second = f[1]  # B: nothing in front of it, no region of its class on the map
-    assert second["corridor_cells"] == 0 and second["carry_margin_05"] == pytest.approx(Z_CARRY - b, abs=1e-6)
-    assert second["object_front_row"] == 17 and second["region_free"] == 0
-    assert second["grey_behind"] == 15  # the grey cells behind A that lie in B's columns too
-    assert second["offset_cols"] == pytest.approx(0) and second["edge_distance"] == 2  # B is 3 rows deep
-    off = f[2]  # on no object: its height and the scene only
-    assert off["on_object"] == 0 and off["object_area"] == 0 and off["carry_margin_05"] == 0
-    assert off["scene_objects"] == 2
-    corner = f[3]  # A's back left corner: on the edge, behind and left of the centre
-    assert corner["edge_distance"] == 1 and corner["offset_rows"] == pytest.approx(-2 / 5)
-    assert corner["offset_cols"] == pytest.approx(2 / 5)
-    # B moved into A's region: A is no longer in front of anything, and the region is less free
-    moved = obs.copy()
-    paint(moved, slice(20, 23), slice(12, 17), (255, 255, 255), 0.0)
-    paint(moved, slice(32, 35), slice(2, 5), CLASS_RGB[1], 0.12)
-    y = dict(zip(fg.FEATURES, fg.geometry_features(moved, cells[:1])[0].astype(float)))
-    assert y["corridor_cells"] == 0 and y["region_free"] == pytest.approx(191 / 200)
-    assert y["region_tallest"] == pytest.approx(b)
-    mirrored = fg.geometry_features(obs[:, :, ::-1].copy(), np.array([7 * 60 + 59 - 12]))
-    assert np.allclose(mirrored, x[:1])  # the features are symmetric under the left-right mirror
-    # round two: B blocks A's carry (its 12 cm top is above A's bottom, Z_CARRY - 10 cm)
-    both = fg.geometry_features(obs, cells[:2], blockers=True)
-    assert np.array_equal(both[:, :len(fg.FEATURES)], x[:2])  # round one's columns unchanged
-    blocked = dict(zip(fg.BLOCKER_FEATURES, both[0, len(fg.FEATURES):].astype(float)))
-    assert blocked["blockers"] == 1 and blocked["blocker_gap"] == 10 and blocked["blocker_to_opening"] == 17
-    assert blocked["blocker_rows"] == 3 and blocked["blocker_cols"] == 5 and blocked["blocker_area"] == 15
-    assert blocked["blocker_in_corridor"] == pytest.approx(3 / 5) and blocked["blockers_area"] == 15
-    assert blocked["blocker_stopped"] == 0 and blocked["carry_bottom"] == pytest.approx(Z_CARRY - a, abs=1e-6)
-    free = dict(zip(fg.BLOCKER_FEATURES, both[1, len(fg.FEATURES):].astype(float)))
-    assert free["blockers"] == 0 and free["blocker_area"] == 0 and free["carry_bottom"] == pytest.approx(Z_CARRY - b)
-    stopper = obs.copy()  # a low object in front of B, in B's columns but not A's: it may stop B
-    paint(stopper, slice(26, 28), slice(16, 18), CLASS_RGB[2], 0.03)
-    stopped = dict(zip(fg.feature_names(True), fg.geometry_features(stopper, cells[:1], blockers=True)[0]))
-    assert stopped["blocker_stopped"] == 1 and stopped["blockers"] == 1 and stopped["corridor_cells"] == 9
-    with pytest.raises(ValueError, match="one \\(4, H, W\\) observation"):
-        fg.geometry_features(obs[:3], cells)
-    with pytest.raises(ValueError, match="cells must lie in"):
-        fg.geometry_features(obs, np.array([2400]))
+from shelf_env.fall_filter import geometry_features, geometry_risk_path
+from tests.test_fall_filter import crafted, paint
 
 
 def corridor_shards(folder, shards=3, episodes=8, states=5, seed=0):
@@ -189,7 +113,7 @@ def test_the_reading_and_the_two_fold_split():
 
 def test_feature_channels_hold_each_cell_s_features(tmp_path):
     obs = crafted()
-    x = fg.geometry_features(obs, np.arange(40 * 60), blockers=True)
+    x = geometry_features(obs, np.arange(40 * 60), blockers=True)
     mean, std = x.mean(axis=0), x.std(axis=0)
     channels = fg.feature_channels(obs, mean, std)
     assert channels.shape == (36, 40, 60) and channels.dtype == np.uint8
@@ -228,7 +152,6 @@ def test_the_fall_model_with_feature_channels_reports_what_its_saved_weights_sco
 def test_the_geometry_risk_scores_every_object_cell_as_the_fit_did_and_filters_a_checkpoint(tmp_path, capsys):
     """An exported fit model: its risk at each labelled cell is the fit's on that label's features, 0 off
     objects; ``<zip>+geometry-filter`` plays the checkpoint under `FallFilter` with it."""
-    from research import evaluate  # noqa: F401  (registers the experiments' wrappers)
     from shelf_env import policies
 
     data = tmp_path / "data"
@@ -247,16 +170,16 @@ def test_the_geometry_risk_scores_every_object_cell_as_the_fit_did_and_filters_a
     with pytest.raises(ValueError, match="not a checkpoint"):
         policies.check_policy("h-d+geometry-filter")
     bad = ["export", "--models", str(tmp_path / "fit.models.pt"), "--features", str(tmp_path / "f.npz"),
-           "--obs-shape", "4,20,30", "--out", str(fg.geometry_risk_path(zip_path))]
+           "--obs-shape", "4,20,30", "--out", str(geometry_risk_path(zip_path))]
     assert fg.main([*bad, "--threshold", "1.5"]) == 2
-    assert "threshold must be in (0, 1]" in capsys.readouterr().err and not fg.geometry_risk_path(zip_path).exists()
+    assert "threshold must be in (0, 1]" in capsys.readouterr().err and not geometry_risk_path(zip_path).exists()
     assert fg.main([*bad, "--threshold", "0.5", "--name", "nope"]) == 2
     assert "not 'nope'" in capsys.readouterr().err
     assert fg.main([*bad, "--threshold", "0.5"]) == 0
-    risk = fg.GeometryRisk.load(fg.geometry_risk_path(zip_path))
+    risk = ff.GeometryRisk.load(geometry_risk_path(zip_path))
     assert risk.threshold == 0.5 and risk.blockers and risk.hidden == 64 and risk.info["obs_shape"] == [4, 20, 30]
     import torch as th
-    fitted = fg.FeatureModel(np.zeros(36), np.ones(36), 64)
+    fitted = ff.FeatureModel(np.zeros(36), np.ones(36), 64)
     fitted.load_state_dict(th.load(tmp_path / "fit.models.pt", weights_only=True)["mlp"])
     _, val = fr.load_splits(data, 0.25)
     with np.load(tmp_path / "f.npz") as z:
@@ -270,7 +193,7 @@ def test_the_geometry_risk_scores_every_object_cell_as_the_fit_did_and_filters_a
     assert (per_cell[object_blobs(obs) < 0] == 0).all()  # nothing to drop where no object is
     assert policies.check_policy(f"{zip_path}+geometry-filter") == ("pick", "push")
     policy = policies.make_policy(f"{zip_path}+geometry-filter", env)
-    assert isinstance(policy, fr.FallFilter) and policy.risk.threshold == 0.5
+    assert isinstance(policy, ff.FallFilter) and policy.risk.threshold == 0.5
     action, _ = policy.predict(obs, action_masks=np.ones(env.action_space.n, bool))
     pick_cells = action < 20 * 30
     assert not pick_cells or per_cell.reshape(-1)[action] < 0.5  # a pick it plays is one the filter keeps
