@@ -166,3 +166,71 @@ def test_a_new_distilled_model_moves_the_one_it_replaces_to_v2_with_its_report_a
     assert "p_s.zip has no distillation report beside it (p_s.distill.json)" in capsys.readouterr().out
     assert sorted(p.name for p in bare.iterdir()) == ["p_s.zip"]
     assert (bare / "p_s.zip").read_bytes() == first.read_bytes()
+
+
+def geometry_risk(checkpoint, path, threshold=0.1, shape=None):
+    """A `GeometryRisk` fitted (here: made) on ``checkpoint``'s observations, saved to ``path``."""
+    import numpy as np
+
+    from shelf_env.fall_filter import FeatureModel, GeometryRisk, feature_names
+
+    n = len(feature_names(True))
+    shape = shape or PixelDoubleDQN.load(checkpoint).observation_space.shape
+    GeometryRisk(FeatureModel(np.zeros(n), np.ones(n), 0), True, threshold, shape).save(path)
+    return path
+
+
+def test_a_distilled_p_s_ships_with_its_geometry_filter_which_moves_with_it_when_replaced(finished_run, tmp_path,
+                                                                                           capsys):
+    out = tmp_path / "pretrained"
+    first = distillation(finished_run, tmp_path / "a", init=str(out / "p_s.zip"))
+    risk = geometry_risk(first, tmp_path / "r.geometry_risk.pt")
+    results = tmp_path / "eval"
+    results.mkdir()
+    (results / "results.csv").write_text(
+        "policy,object_set,num_objects,sr_mean,sr_std,ae_mean,mae_mean\n"
+        "p_s_dagger3_avg2,ycb,3,90.0,1.0,1.2,0.9\ngeo+geometry-filter+loop-breaker,ycb,3,96.0,1.0,1.3,0.9\n"
+        "p_s,ycb,3,80.0,2.0,1.1,0.8\np_s_dagger9_avg2,ycb,3,91.0,1.0,1.3,0.9\n")
+    # refused, nothing written: no label, a label no evaluation has, a risk of other observations, no P+S to filter
+    args = ["--training", str(finished_run), "--out", str(out), "--distilled", str(first), "--geometry-risk", str(risk)]
+    assert main(args) == 2 and "needs --geometry-label" in capsys.readouterr().out
+    assert main([*args, "--geometry-label", "nope", "--results", str(results)]) == 2
+    assert "no rows of ['nope']" in capsys.readouterr().out
+    other = geometry_risk(first, tmp_path / "o.pt", shape=(4, 8, 8))
+    assert main([*args[:-1], str(other), "--geometry-label", "geo+geometry-filter+loop-breaker"]) == 2
+    assert "was fitted on observations of shape (4, 8, 8)" in capsys.readouterr().out
+    assert main([*args[:4], "--geometry-risk", str(risk), "--geometry-label", "x"]) == 2
+    assert "holds none (ship one with --distilled)" in capsys.readouterr().out
+    assert not out.exists()
+    shipped = ship(None, finished_run, out, [results], first, risk, "geo+geometry-filter+loop-breaker")
+    assert shipped[-1] == out / "p_s.geometry_risk.pt" and shipped[-1].read_bytes() == risk.read_bytes()
+    assert json.loads((out / "p_s.geometry_risk.json").read_text()) == {
+        "source": risk.as_posix(), "command": "bash results/fall_geometry/run.sh",
+        "label": "geo+geometry-filter+loop-breaker"}
+    card = (out / "README.md").read_text()
+    name = f"{(out / 'p_s.zip').as_posix()}+geometry-filter+loop-breaker"
+    assert "`p_s.zip+geometry-filter+loop-breaker` is the P+S to use" in card
+    assert "`p_s.zip` holds its Q-maps: distilled" in card and "`p_s.zip` is the P+S to use" not in card
+    assert f'policy = make_policy("{name}", env)' in card and "risk is at least 0.1 masked out" in card
+    assert "this policy is `geo+geometry-filter+loop-breaker` there" in card
+    assert "| ycb | 3 | 96.0 ± 1.0 | 80.0 ± 2.0 | 90.0 ± 1.0 | 91.0 ± 1.0 | 1.30 | 0.90 |" in card
+    # the same policy from the registry, as the card names it
+    from shelf_env import policies
+
+    assert policies.check_policy(name) == ("pick", "push")
+    # shipping a run again keeps the filter and its card
+    ship(["p_s"], finished_run, out, [results])
+    assert "`p_s.zip+geometry-filter+loop-breaker` is the P+S to use" in (out / "README.md").read_text()
+    # a new p_s.zip (other bytes, no filter) moves the filtered one to v2/ with its filter: p_s.zip is unfiltered
+    second = distillation(finished_run, tmp_path / "b", name="p_s_dagger9_avg2", init=str(out / "v1" / "p_s.zip"))
+    model = PixelDoubleDQN.load(second)
+    model.num_timesteps += 1
+    model.save(second)
+    ship(None, finished_run, out, [results], second)
+    assert (out / "v2" / "p_s.geometry_risk.pt").read_bytes() == risk.read_bytes()
+    assert (out / "v2" / "p_s.geometry_risk.json").is_file()
+    assert not (out / "p_s.geometry_risk.pt").exists() and not (out / "p_s.geometry_risk.json").exists()
+    card = (out / "README.md").read_text()
+    assert "`p_s.zip` is the P+S to use" in card and "geometry-filter+loop-breaker` is the P+S to use" not in card
+    assert f'make_policy("{(out / "v2" / "p_s.zip").as_posix()}+geometry-filter+loop-breaker", env)' in card
+    assert card.count("## The policy to use: under the geometry pick filter") == 1

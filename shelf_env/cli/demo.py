@@ -25,27 +25,30 @@ import cv2
 import gymnasium as gym
 import numpy as np
 
-from sb3_pixeldqn.loop_breaker import LoopBreaker
 from shelf_env import params
 from shelf_env.actions import ActionCodec
 from shelf_env.evaluation import protocol as ev
 from shelf_env.files import write_atomically
+from shelf_env.policies import policy_files, policy_wrappers
 
-#: The policy shelf-demo shows by default: the shipped P+S model, else the best committed checkpoint.
-DEFAULT_POLICIES = ("examples/pretrained/p_s.zip", "results/learning/recipe_n3.zip")
+#: The policy shelf-demo shows by default: the shipped P+S as examples/pretrained/README.md says to play it (under its
+#: geometry pick filter and the loop breaker), else the shipped P+S alone, else the best committed checkpoint.
+DEFAULT_POLICIES = ("examples/pretrained/p_s.zip+geometry-filter+loop-breaker", "examples/pretrained/p_s.zip",
+                    "results/learning/recipe_n3.zip")
 PANEL = (400, 300)  # width, height of each panel
 PRIMITIVE_LABEL = {"pick": "pick-and-place", "push_left": "push left", "push_right": "push right"}
 
 
 def default_policy(root: pathlib.Path | None = None) -> str:
-    """The first of `DEFAULT_POLICIES` that exists (relative to the project root or the cwd)."""
+    """The first of `DEFAULT_POLICIES` whose files all exist (relative to the project root or the cwd)."""
     roots = [pathlib.Path.cwd()] if root is None else [root]
     roots.append(pathlib.Path(__file__).resolve().parents[2])
     for rel in DEFAULT_POLICIES:
+        name, wrappers = policy_wrappers(rel)
         for base in roots:
-            if (base / rel).is_file():
-                path, cwd = (base / rel).resolve(), pathlib.Path.cwd()
-                return str(path.relative_to(cwd)) if path.is_relative_to(cwd) else str(path)
+            if all(f.is_file() for f in policy_files(str(base / name) + "".join(wrappers))):
+                path, cwd = (base / name).resolve(), pathlib.Path.cwd()
+                return (str(path.relative_to(cwd)) if path.is_relative_to(cwd) else str(path)) + "".join(wrappers)
     raise ValueError(f"no committed policy found ({', '.join(DEFAULT_POLICIES)}); pass --policy")
 
 
@@ -116,11 +119,18 @@ def frame(scene: np.ndarray, obs: np.ndarray, q: np.ndarray | None, allowed: np.
 
 def q_map_values_of(agent: Any) -> Any:
     """The Q-map function (``obs -> (maps, rows, cols)``) of a checkpoint's network, or an ensemble's mean maps
-    (`sb3_pixeldqn.QEnsemble`), looked up through a `LoopBreaker` (which wraps the model: the overlay shows the
-    model's own values, and the marked cell is what the breaker let it do); None for a heuristic."""
-    inner = agent.policy if isinstance(agent, LoopBreaker) else agent
-    own = getattr(inner, "q_map_values", None)
-    return own if own is not None else getattr(getattr(inner, "policy", None), "q_map_values", None)
+    (`sb3_pixeldqn.QEnsemble`), looked up through the wrappers around it (a `LoopBreaker`, a
+    `shelf_env.fall_filter.FallFilter`: each holds what it wraps as ``policy``), so the overlay shows the model's
+    own values and the marked cell is what the wrappers let it do; None for a heuristic."""
+    inner = agent
+    for _ in range(8):  # a wrapper, a model, its network: a few levels down at most
+        own = getattr(inner, "q_map_values", None)
+        if own is not None:
+            return own
+        inner = getattr(inner, "policy", None)
+        if inner is None:
+            return None
+    return None
 
 
 def run(policy: str, n: int, seed: int, object_set: str, out: pathlib.Path, max_actions: int = params.MAX_ACTIONS,

@@ -27,8 +27,9 @@ import pathlib
 from collections import Counter
 from typing import Any
 
+from shelf_env.fall_filter import GEOMETRY_FILTER, GeometryRisk, geometry_risk_path
 from shelf_env.files import write_text_atomically
-from shelf_env.policies import checkpoint_pixel_size, checkpoint_primitives
+from shelf_env.policies import LOOP_BREAKER, checkpoint_pixel_size, checkpoint_primitives
 
 
 def stage_times(run: pathlib.Path, history: list[list[int]]) -> list[tuple[int, int, float | None]]:
@@ -95,6 +96,39 @@ def evaluation_section(results: pathlib.Path, label: str) -> list[str]:
             evaluation_table(results, label)]
 
 
+def filtered_name(zip_path: pathlib.Path | str) -> str:
+    """The policy name a checkpoint is played as under the geometry pick filter beside it and the loop breaker."""
+    return f"{pathlib.PurePath(zip_path).as_posix()}{GEOMETRY_FILTER}{LOOP_BREAKER}"
+
+
+def filter_section(info: dict[str, Any], zip_path: pathlib.Path, results: pathlib.Path | None) -> list[str]:
+    """The card's part on playing ``zip_path`` under the `shelf_env.fall_filter.GeometryRisk` beside it and the loop
+    breaker, from what shipped it (``info``: the risk's ``source`` file, the ``command`` that made it and its
+    ``label`` in evaluations), with that policy's evaluation rows from ``results``."""
+    risk = geometry_risk_path(zip_path)
+    threshold = GeometryRisk.load(risk).threshold
+    name = filtered_name(zip_path)
+    out = ["", "## The policy to use: under the geometry pick filter and the loop breaker", "",
+           "```python",
+           "from shelf_env.policies import make_policy",
+           f'policy = make_policy("{name}", env)   # env as above',
+           "action, _ = policy.predict(obs, deterministic=True, action_masks=env.unwrapped.action_masks(),",
+           "                           episode_start=np.array([first]))   # first: True on an episode's first step",
+           "```", "",
+           f"The Q-maps above with the pick cells whose predicted fall risk is at least {threshold:g} masked out "
+           f"(`shelf_env.fall_filter.FallFilter`; the risk `{risk.as_posix()}` is a `GeometryRisk`: an MLP on named "
+           "carry geometry read from the camera observation alone), then `sb3_pixeldqn.LoopBreaker` (it bans the "
+           "cells the episode has acted at too often). The risk: `" + str(info["command"]) + "`, its line that "
+           f"writes `{info['source']}` (docs/experiments/fall-geometry.md). Evaluations and `shelf-demo` name this "
+           f"policy `{name}`."]
+    if results is not None:
+        out += ["", "### Its evaluation", "",
+                f"Greedy, masked, on held-out scenes (`{results.as_posix()}/results.csv`; the same scenes for every "
+                f"policy; this policy is `{info['label']}` there): success rate mean ± std over seeds, and its AE "
+                "and mAE.", "", evaluation_table(results, str(info["label"]))]
+    return out
+
+
 def model_card(run: pathlib.Path, zip_path: pathlib.Path, results: pathlib.Path | None, command: str,
                title: str | None = None) -> str:
     """The markdown card of the model trained in ``run`` and shipped as ``zip_path`` (headed ``title``)."""
@@ -155,7 +189,8 @@ def recipe_terms(report: dict[str, Any]) -> list[str]:
 
 
 def distilled_card(report_path: pathlib.Path, zip_path: pathlib.Path, results: pathlib.Path | None, command: str,
-                   title: str | None = None, moved: dict[str, str] | None = None) -> str:
+                   title: str | None = None, moved: dict[str, str] | None = None,
+                   played: tuple[dict[str, Any], pathlib.Path | None] | None = None) -> str:
     """The card of a model distilled from the teacher dataset, from its distillation report.
 
     Its evaluation rows are those of the label it was evaluated under: the file stem the distillation wrote
@@ -190,6 +225,8 @@ def distilled_card(report_path: pathlib.Path, zip_path: pathlib.Path, results: p
            "CPU thread."]
     if results is not None:
         out += evaluation_section(results, pathlib.Path(report["out"]).stem)
+    if played is not None:
+        out += filter_section(played[0], zip_path, played[1])
     return "\n".join(out) + "\n"
 
 

@@ -3,6 +3,8 @@
     python -m shelf_env.training.ship                     # every model whose run is over (s, v1/p_s)
     python -m shelf_env.training.ship --distilled runs/distill_scaling/NAME.zip \\
         --results results/models_v2 results/models    # a distilled P+S as p_s.zip, the cards' tables
+    python -m shelf_env.training.ship --geometry-risk results/fall_geometry/filter/p_s_geo10.geometry_risk.pt \\
+        --geometry-label p_s_geo10+geometry-filter+loop-breaker --results ...   # the shelf's p_s.zip, filtered
     bash scripts/ship_models.sh                  # the same, with the evaluations when there are some
 
 The shelf holds the P+S to use, ``p_s.zip``: since 2026-12-04 a P+S distilled from the teacher dataset
@@ -11,6 +13,13 @@ the pick-only S trained with PixelDoubleDQN; and ``v1/p_s.zip``, the P+S trained
 that was ``p_s.zip`` until then (the model every result before that date calls ``p_s``, and the one the
 distillation started from). Nothing shipped is lost: a distilled ``p_s.zip`` that a new one replaces
 moves, with its report, to the first free ``v<k>/`` (k >= 2), and keeps its card there.
+
+A distilled ``p_s.zip`` may ship with a camera-only pick filter beside it (``--geometry-risk``: a
+`shelf_env.fall_filter.GeometryRisk`, copied as ``p_s.geometry_risk.pt``, with ``p_s.geometry_risk.json`` saying where
+it came from and under which label evaluations played it, ``--geometry-label``): the policy to use is then
+``p_s.zip+geometry-filter+loop-breaker`` (`shelf_env.policies`), and the card says so with that policy's
+evaluation. The filter was evaluated with those Q-maps, so it moves with them to ``v<k>/`` when a new
+``p_s.zip`` replaces them.
 
 A run ships once its curriculum is over (``finished`` in ``results/training/<model>/progress.json``: the
 last stage has trained its ``max_stage_timesteps``), never mid-run; a model named on the command line
@@ -29,13 +38,15 @@ import argparse
 import csv
 import json
 import pathlib
+from typing import Any
 
 from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env.evaluation.protocol import checkpoint_primitives
-from shelf_env.files import copy_atomically, write_text_atomically
+from shelf_env.fall_filter import GeometryRisk, geometry_risk_path
+from shelf_env.files import copy_atomically, write_json_atomically, write_text_atomically
 from shelf_env.training.config import PRESETS
 from shelf_env.training.distill import report_path
-from shelf_env.training.model_card import distilled_card, model_card, model_cards
+from shelf_env.training.model_card import distilled_card, filtered_name, model_card, model_cards
 
 #: The runs that ship, by the name of their preset and run (the preset gives the layout's primitives), and
 #: where each goes on the shelf: the RL-trained P+S was ``p_s.zip`` until the distilled one replaced it.
@@ -46,10 +57,18 @@ DISTILLED_REPORT = report_path(DISTILLED).name
 MAX_MB = 20.0
 COMMAND = "bash scripts/train_model.sh {model}"
 DISTILL_COMMAND = "bash results/distill_scaling/run.sh"
-HEAD = ("`p_s.zip` is the P+S to use: distilled from the teacher dataset into the Q-maps of `v1/p_s.zip`, the P+S "
+HEAD = ("`p_s.zip` {what}: distilled from the teacher dataset into the Q-maps of `v1/p_s.zip`, the P+S "
         "trained with PixelDoubleDQN that was `p_s.zip` until 2026-12-04 (every result before that date calls it "
         "`p_s`). Each model was made by the command in its card and copied here with `bash scripts/ship_models.sh` "
         "(which also writes this file).")
+#: The geometry pick filter a distilled P+S may ship with, beside it, and what says where it came from.
+FILTER_RISK = geometry_risk_path(DISTILLED).name
+FILTER_INFO = pathlib.Path(FILTER_RISK).with_suffix(".json").name
+FILTER_COMMAND = "bash results/fall_geometry/run.sh"
+#: The head when the shelf's p_s.zip ships with its filter: the policy to use is the filtered one.
+FILTERED_HEAD = (f"`{filtered_name(DISTILLED)}` is the P+S to use: the Q-maps of `p_s.zip` played under a camera-only "
+                 f"pick filter (`{FILTER_RISK}`, `shelf_env.fall_filter`) and the loop breaker "
+                 "(`sb3_pixeldqn.LoopBreaker`); `p_s.zip` alone is the distilled P+S without them. ")
 #: What the head adds when earlier distilled P+S are on the shelf (``v<k>/``, k >= 2).
 ARCHIVE_HEAD = (" The distilled P+S that `p_s.zip` replaced stay here, each in `v<k>/` with its report and card ({}); "
                 "results name each distilled model by its distillation's name.")
@@ -96,6 +115,15 @@ def check_checkpoint(path: pathlib.Path, model: str) -> None:
         raise ValueError(f"{path} has the maps {loaded.policy.maps}, not those of {model!r} (primitives {expected})")
 
 
+def check_geometry_risk(path: pathlib.Path, checkpoint: pathlib.Path) -> None:
+    """Raise ValueError unless ``path`` is a `GeometryRisk` fitted on ``checkpoint``'s observations."""
+    risk = GeometryRisk.load(path)  # its errors name the file
+    expected = tuple(PixelDoubleDQN.load(checkpoint, device="cpu").observation_space.shape)
+    if tuple(risk.info["obs_shape"]) != expected:
+        raise ValueError(f"{path} was fitted on observations of shape {tuple(risk.info['obs_shape'])}; {checkpoint}'s "
+                         f"are {expected}")
+
+
 def evaluated_policies(folder: pathlib.Path) -> set[str]:
     """The policy labels of an evaluation folder's ``results.csv``."""
     with open(folder / "results.csv", newline="") as f:
@@ -112,11 +140,13 @@ def results_with(folders: list[tuple[pathlib.Path, set[str]]], label: str) -> pa
 
 
 def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
-         results: list[pathlib.Path] | None = None, distilled: pathlib.Path | None = None) -> list[pathlib.Path]:
+         results: list[pathlib.Path] | None = None, distilled: pathlib.Path | None = None,
+         geometry_risk: pathlib.Path | None = None, geometry_label: str | None = None) -> list[pathlib.Path]:
     """Copy the finished runs' checkpoints (and ``distilled``) to ``out`` and write the card; returns the zips
     shipped now.
 
-    ``models`` None ships every run that is over; named models must be over.
+    ``models`` None ships every run that is over; named models must be over. ``geometry_risk`` ships beside the
+    distilled ``p_s.zip`` (shipped now or on the shelf), played under the label ``geometry_label`` in ``results``.
     """
     unknown = sorted(set(models or []) - set(MODELS))
     if unknown:
@@ -137,6 +167,15 @@ def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
             raise ValueError(f"{distilled} has no distillation report beside it ({report_path(distilled).name}): "
                              "ship what python -m shelf_env.training.distill wrote")
         check_checkpoint(distilled, "p_s")
+    if geometry_risk is not None:
+        target = distilled if distilled is not None else out / DISTILLED
+        if not (out / DISTILLED_REPORT).is_file() and distilled is None:
+            raise ValueError(f"a geometry risk ships beside a distilled {DISTILLED}; {out} holds none (ship one with "
+                             "--distilled)")
+        if not geometry_label:
+            raise ValueError("--geometry-risk needs --geometry-label: the label its evaluations gave the filtered "
+                             f"policy (e.g. NAME{filtered_name('')})")
+        check_geometry_risk(geometry_risk, target)
     replaced = replaced_version(out, distilled) if distilled is not None else None
     versions = ([replaced] if replaced else []) + archived(out)  # the earlier distilled P+S, newest first
     report = report_path(distilled) if distilled is not None else out / DISTILLED_REPORT
@@ -149,28 +188,56 @@ def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
         source = out / DISTILLED_REPORT if k == replaced else out / f"v{k}" / DISTILLED_REPORT
         cards.append((f"v{k}/{DISTILLED}", out / f"v{k}" / DISTILLED_REPORT, shelf_label(source), k))
     cards += [(MODELS[m], training / m, m, 1) for m in MODELS if m in models or (out / MODELS[m]).exists()]
-    # checked before anything is written: the card needs every shipped model's rows
+    # the filter each distilled P+S ships with (what shipped it): the new one's, else where its files lie now (a
+    # replaced p_s.zip's move with it to v<k>/)
+    filters: dict[str, dict[str, Any]] = {}
+    for name, _, _, k in cards:
+        if name == DISTILLED and geometry_risk is not None:
+            filters[name] = {"source": geometry_risk.as_posix(), "command": FILTER_COMMAND, "label": geometry_label}
+            continue
+        if name == DISTILLED:
+            info = out / FILTER_INFO if replaced is None else None
+        elif name == f"v{k}/{DISTILLED}":
+            info = out / FILTER_INFO if k == replaced else out / f"v{k}" / FILTER_INFO
+        else:
+            continue
+        if info is not None and info.is_file():
+            filters[name] = json.loads(info.read_text())
+    # checked before anything is written: the card needs every shipped model's (and filtered policy's) rows
     evaluations = [(folder, evaluated_policies(folder)) for folder in results or []]
     folders = [results_with(evaluations, label) if results else None for _, _, label, _ in cards]
+    filter_folders = {name: results_with(evaluations, info["label"]) if results else None
+                      for name, info in filters.items()}
     shipped = [copy_atomically(training / m / "model.zip", out / MODELS[m]) for m in models]
     if distilled is not None:
-        if replaced:  # the P+S it replaces keeps its place on the shelf, with its report
+        if replaced:  # the P+S it replaces keeps its place on the shelf, with its report (and its filter)
             copy_atomically(out / DISTILLED_REPORT, out / f"v{replaced}" / DISTILLED_REPORT)
             copy_atomically(out / DISTILLED, out / f"v{replaced}" / DISTILLED)
+            for name in (FILTER_RISK, FILTER_INFO):
+                if (out / name).is_file():
+                    copy_atomically(out / name, out / f"v{replaced}" / name)
+                    (out / name).unlink()
         copy_atomically(report_path(distilled), out / DISTILLED_REPORT)
         shipped.insert(0, copy_atomically(distilled, out / DISTILLED))
+    if geometry_risk is not None:
+        shipped.append(copy_atomically(geometry_risk, out / FILTER_RISK))
+        write_json_atomically(out / FILTER_INFO, filters[DISTILLED])
     texts = []
     for (name, source, _, k), folder in zip(cards, folders):
         if source.name == DISTILLED_REPORT:
             # a report names its starting model where it was then: p_s.zip then is the version before it now
             moved = {(out / DISTILLED).as_posix(): (out / f"v{k - 1}" / DISTILLED).as_posix()}
-            texts.append((name, distilled_card(source, out / name, folder, DISTILL_COMMAND, name, moved)))
+            played = (filters[name], filter_folders[name]) if name in filters else None
+            texts.append((name, distilled_card(source, out / name, folder, DISTILL_COMMAND, name, moved, played)))
         else:
             texts.append((name, model_card(source, out / name, folder, COMMAND.format(model=source.name), name)))
     if texts:
         head = ""
         if cards[0][0] == DISTILLED:
-            head = HEAD + (ARCHIVE_HEAD.format(", ".join(f"`v{k}/`" for k in versions)) if versions else "")
+            filtered = DISTILLED in filters
+            head = (FILTERED_HEAD if filtered else "") + HEAD.format(what="holds its Q-maps" if filtered
+                                                                     else "is the P+S to use")
+            head += ARCHIVE_HEAD.format(", ".join(f"`v{k}/`" for k in versions)) if versions else ""
         write_text_atomically(out / "README.md", model_cards(texts, head))
     return shipped
 
@@ -189,9 +256,15 @@ def main(argv: list[str] | None = None) -> int:
                    help="where the shipped zips and their card go")
     p.add_argument("--results", type=pathlib.Path, nargs="+", default=None,
                    help="evaluations of the shipped models (each card's table: the first that has the model)")
+    p.add_argument("--geometry-risk", type=pathlib.Path, default=None,
+                   help=f"a GeometryRisk to ship beside the distilled {DISTILLED} as {FILTER_RISK} "
+                        "(python -m research.fall_geometry export)")
+    p.add_argument("--geometry-label", default=None,
+                   help="the label evaluations gave the filtered policy (its rows in --results)")
     args = p.parse_args(argv)
     try:
-        shipped = ship(args.models or None, args.training, args.out, args.results, args.distilled)
+        shipped = ship(args.models or None, args.training, args.out, args.results, args.distilled,
+                       args.geometry_risk, args.geometry_label)
     except (OSError, KeyError, ValueError) as err:
         print(f"ship: error: {err}", flush=True)
         return 2
