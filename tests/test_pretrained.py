@@ -60,3 +60,40 @@ def test_shipped_model_on_the_wrong_layout_is_refused_by_name(zip_path):
         with pytest.raises(ValueError, match=f"checkpoint {zip_path} does not fit this env"):
             PixelDoubleDQN.load(zip_path, env=env)
         env.close()
+
+
+FILTERS = sorted(PRETRAINED.rglob("*.geometry_risk.pt"))
+
+
+def test_the_shipped_p_s_plays_under_its_geometry_filter_as_its_card_says():
+    """The shelf's p_s.zip ships with its camera-only pick filter: the policy the card names loads from the
+    registry alone and acts within the masks, playing no pick the filter masks while a kept one is allowed."""
+    from shelf_env.fall_filter import FallFilter
+    from shelf_env.training.ship import FILTER_INFO, FILTER_RISK
+
+    assert PRETRAINED / FILTER_RISK in FILTERS  # the P+S to use is the filtered one
+    card = (PRETRAINED / "README.md").read_text()
+    for risk in FILTERS:
+        zip_path = risk.with_name(DISTILLED)
+        assert zip_path.is_file() and risk.with_name(FILTER_INFO).is_file()
+        name = f"{zip_path.relative_to(PRETRAINED.parents[1]).as_posix()}+geometry-filter+loop-breaker"
+        assert f'make_policy("{name}", env)' in card
+        env = gym.make("ShelfSort-v0", num_objects=5, primitives=ev.checkpoint_primitives(zip_path),
+                       pixel_size=ev.checkpoint_pixel_size(zip_path))
+        policy = ev.make_policy(str(PRETRAINED.parents[1] / name), env)
+        filt = policy.policy
+        assert isinstance(filt, FallFilter)
+        obs, _ = env.reset(seed=ev.scene_seed(7, 5, 0))
+        first = True
+        for _ in range(4):
+            masks = env.unwrapped.action_masks()
+            risky = (filt.risk.risk(obs) >= filt.risk.threshold).reshape(-1)
+            action = int(np.asarray(policy.predict(obs, episode_start=np.array([first]), action_masks=masks)[0])[()])
+            first = False
+            assert masks[action]
+            if action < risky.size and (masks[:risky.size] & ~risky).any():
+                assert not risky[action]
+            obs, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                break
+        env.close()
