@@ -6,7 +6,7 @@
 # its card; one that ZIP replaces moves to v<k>/, k >= 2, with its report and card), and with --geometry-risk FILE
 # --geometry-label LABEL the camera-only pick filter the shelf's p_s.zip is played under (the card then names
 # p_s.zip+geometry-filter+loop-breaker as the policy to use). Each card's evaluation table comes from the first of
-# results/fall_geometry/sv_open (the filtered P+S's §V evaluation), results/models_v3/open, results/models_v2/open
+# results/models_v4/open (the filtered P+S's §V evaluation), results/models_v3/open, results/models_v2/open
 # (the distilled P+S's) and results/models (issue 10's) that evaluated it, where they are complete.
 # Order: train_model.sh p_s|s or distill -> ship_models.sh -> evaluate_models.sh / results/models_v2/run.sh ->
 # ship_models.sh (the cards' tables). The distilled P+S shipped on 2026-12-04 (now v2/p_s.zip), then the one that
@@ -21,7 +21,7 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
 . .venv/bin/activate
 folders=()
-for f in results/fall_geometry/sv_open results/models_v3/open results/models_v2/open results/models; do
+for f in results/models_v4/open results/models_v3/open results/models_v2/open results/models; do
   if [ -f $f/results.json ] && python -c "import json,sys; sys.exit(0 if json.load(open('$f/results.json'))['config'].get('complete') else 1)"; then
     folders+=("$f")
   fi
