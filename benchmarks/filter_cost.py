@@ -36,10 +36,12 @@ def measure(model: str, filtered: str, n: int, decisions: int) -> tuple[float, f
         bare, wrapped = make_policy(model, env), make_policy(filtered, env)
         start = np.array([True])  # each observation as an episode's first: the breaker bans nothing yet
         states = first_states(env, n, decisions)
+        def filtered_action(o: np.ndarray, m: np.ndarray) -> np.ndarray:
+            return wrapped.predict(o, deterministic=True, episode_start=start, action_masks=m)[0]
+
         one = seconds_per_call(lambda s: bare.predict(s[0], deterministic=True, action_masks=s[1]), states)
-        both = seconds_per_call(lambda s: wrapped.predict(s[0], episode_start=start, action_masks=s[1]), states)
-        step = seconds_per_action(env, n, states, lambda o, m: wrapped.predict(o, episode_start=start,
-                                                                                action_masks=m)[0])
+        both = seconds_per_call(lambda s: filtered_action(s[0], s[1]), states)
+        step = seconds_per_action(env, n, states, filtered_action)
     finally:
         env.close()
     return one, both, step

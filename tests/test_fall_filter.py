@@ -209,7 +209,7 @@ def test_the_product_plays_a_checkpoint_under_its_geometry_filter_and_the_loop_b
     assert risky.any() and not risky.all()
     masks = env.unwrapped.action_masks()
     for _ in range(3):
-        action = int(policy.predict(obs, action_masks=masks)[0])
+        action = int(policy.predict(obs, deterministic=True, action_masks=masks)[0])
         if action < risky.size and (masks[:risky.size] & ~risky.reshape(-1)).any():
             assert not risky.reshape(-1)[action]  # a pick it plays is one the filter keeps
     env.close()

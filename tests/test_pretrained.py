@@ -88,7 +88,7 @@ def test_the_shipped_p_s_plays_under_its_geometry_filter_as_its_card_says():
         for _ in range(4):
             masks = env.unwrapped.action_masks()
             risky = (filt.risk.risk(obs) >= filt.risk.threshold).reshape(-1)
-            chosen, _ = policy.predict(obs, episode_start=np.array([first]), action_masks=masks)
+            chosen, _ = policy.predict(obs, deterministic=True, episode_start=np.array([first]), action_masks=masks)
             action = int(np.asarray(chosen).reshape(-1)[0])
             first = False
             assert masks[action]
