@@ -68,7 +68,7 @@ FILTER_COMMAND = "bash results/fall_geometry/run.sh"
 #: The head when the shelf's p_s.zip ships with its filter: the policy to use is the filtered one.
 FILTERED_HEAD = (f"`{filtered_name(DISTILLED)}` is the P+S to use: the Q-maps of `p_s.zip` played under a camera-only "
                  f"pick filter (`{FILTER_RISK}`, `shelf_env.fall_filter`) and the loop breaker "
-                 "(`sb3_pixeldqn.LoopBreaker`); `p_s.zip` alone is the distilled P+S without them. ")
+                 "(`sb3_pixeldqn.LoopBreaker`). ")
 #: What the head adds when earlier distilled P+S are on the shelf (``v<k>/``, k >= 2).
 ARCHIVE_HEAD = (" The distilled P+S that `p_s.zip` replaced stay here, each in `v<k>/` with its report and card ({}); "
                 "results name each distilled model by its distillation's name.")
