@@ -193,7 +193,9 @@ def test_a_distilled_p_s_ships_with_its_geometry_filter_which_moves_with_it_when
         "p_s,ycb,3,80.0,2.0,1.1,0.8\np_s_dagger9_avg2,ycb,3,91.0,1.0,1.3,0.9\n")
     # refused, nothing written: no label, a label no evaluation has, a risk of other observations, no P+S to filter
     args = ["--training", str(finished_run), "--out", str(out), "--distilled", str(first), "--geometry-risk", str(risk)]
-    assert main(args) == 2 and "needs --geometry-label" in capsys.readouterr().out
+    assert main(args) == 2
+    assert "needs --geometry-label: the label its evaluations gave the filtered policy (e.g. " \
+        "NAME+geometry-filter+loop-breaker)" in capsys.readouterr().out
     assert main([*args, "--geometry-label", "nope", "--results", str(results)]) == 2
     assert "no rows of ['nope']" in capsys.readouterr().out
     other = geometry_risk(first, tmp_path / "o.pt", shape=(4, 8, 8))

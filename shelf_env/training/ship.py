@@ -42,8 +42,9 @@ from typing import Any
 
 from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env.evaluation.protocol import checkpoint_primitives
-from shelf_env.fall_filter import GeometryRisk, geometry_risk_path
+from shelf_env.fall_filter import GEOMETRY_FILTER, GeometryRisk, geometry_risk_path
 from shelf_env.files import copy_atomically, write_json_atomically, write_text_atomically
+from shelf_env.policies import LOOP_BREAKER
 from shelf_env.training.config import PRESETS
 from shelf_env.training.distill import report_path
 from shelf_env.training.model_card import distilled_card, filtered_name, model_card, model_cards
@@ -174,7 +175,7 @@ def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
                              "--distilled)")
         if not geometry_label:
             raise ValueError("--geometry-risk needs --geometry-label: the label its evaluations gave the filtered "
-                             f"policy (e.g. NAME{filtered_name('')})")
+                             f"policy (e.g. NAME{GEOMETRY_FILTER}{LOOP_BREAKER})")
         check_geometry_risk(geometry_risk, target)
     replaced = replaced_version(out, distilled) if distilled is not None else None
     versions = ([replaced] if replaced else []) + archived(out)  # the earlier distilled P+S, newest first
