@@ -19,10 +19,11 @@ reward. This module learns the risk directly, as a supervised problem with dense
   from a P+S model's pick FCN) with a binary cross-entropy at the probed cells only, mirrored
   images and renamed classes (`shelf_env.symmetry`) as augmentation; it keeps the epoch and picks
   the decision threshold that do best on held-out training episodes.
-- `FallFilter` wraps a policy at test time: it masks out the pick cells whose predicted risk is
-  over the threshold, and the policy chooses among the rest (a Q-map policy: its best remaining
-  action, a push where every pick is masked). It reads only the observation, so a robot can run
-  it; the labels it learned from came from the simulator, in training only.
+- `FallFilter` (the product's, `shelf_env.fall_filter`) wraps a policy at test time: it masks out
+  the pick cells whose predicted risk is over the threshold, and the policy chooses among the rest
+  (a Q-map policy: its best remaining action, a push where every pick is masked). It reads only
+  the observation, so a robot can run it; the labels it learned from came from the simulator, in
+  training only.
 
 Commands (``python -m research.fall_risk -h``): ``collect`` (resumable, one file per episode,
 shardable over processes), ``train`` (on those episodes, or on the pick labels of the teacher dataset,
