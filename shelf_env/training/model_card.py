@@ -87,11 +87,13 @@ def usage(zip_path: pathlib.Path, title: str | None, how: str, pixel_size: float
             "`model.predict(obs, deterministic=True, action_masks=env.unwrapped.action_masks())`.", ""]
 
 
-def evaluation_section(results: pathlib.Path, label: str) -> list[str]:
-    """The card's evaluation: ``label``'s rows of ``results`` beside every other policy on the same scenes."""
-    return ["", "## Evaluation", "",
+def evaluation_section(results: pathlib.Path, label: str, heading: str = "## Evaluation",
+                       what: tuple[str, str] = ("this model", "this model's")) -> list[str]:
+    """The card's evaluation: ``label``'s rows of ``results`` beside every other policy on the same scenes, under
+    ``heading``, naming what is evaluated as ``what`` (subject, possessive)."""
+    return ["", heading, "",
             f"Greedy, masked, on held-out scenes (`{results.as_posix()}/results.csv`; the same scenes for "
-            f"every policy; this model is `{label}` there): success rate mean ± std over seeds, and this model's "
+            f"every policy; {what[0]} is `{label}` there): success rate mean ± std over seeds, and {what[1]} "
             "AE and mAE.", "",
             evaluation_table(results, label)]
 
@@ -122,10 +124,7 @@ def filter_section(info: dict[str, Any], zip_path: pathlib.Path, results: pathli
            f"writes `{info['source']}` (docs/experiments/fall-geometry.md). Evaluations and `shelf-demo` name this "
            f"policy `{name}`."]
     if results is not None:
-        out += ["", "### Its evaluation", "",
-                f"Greedy, masked, on held-out scenes (`{results.as_posix()}/results.csv`; the same scenes for every "
-                f"policy; this policy is `{info['label']}` there): success rate mean ± std over seeds, and its AE "
-                "and mAE.", "", evaluation_table(results, str(info["label"]))]
+        out += evaluation_section(results, str(info["label"]), "### Its evaluation", ("this policy", "its"))
     return out
 
 

@@ -189,21 +189,15 @@ def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
         source = out / DISTILLED_REPORT if k == replaced else out / f"v{k}" / DISTILLED_REPORT
         cards.append((f"v{k}/{DISTILLED}", out / f"v{k}" / DISTILLED_REPORT, shelf_label(source), k))
     cards += [(MODELS[m], training / m, m, 1) for m in MODELS if m in models or (out / MODELS[m]).exists()]
-    # the filter each distilled P+S ships with (what shipped it): the new one's, else where its files lie now (a
-    # replaced p_s.zip's move with it to v<k>/)
-    filters: dict[str, dict[str, Any]] = {}
-    for name, _, _, k in cards:
-        if name == DISTILLED and geometry_risk is not None:
-            filters[name] = {"source": geometry_risk.as_posix(), "command": FILTER_COMMAND, "label": geometry_label}
-            continue
-        if name == DISTILLED:
-            info = out / FILTER_INFO if replaced is None else None
-        elif name == f"v{k}/{DISTILLED}":
-            info = out / FILTER_INFO if k == replaced else out / f"v{k}" / FILTER_INFO
-        else:
-            continue
-        if info is not None and info.is_file():
-            filters[name] = json.loads(info.read_text())
+    # the filter each distilled P+S ships with (what shipped it): the new one's, else the file beside its Q-maps now
+    # (a replaced p_s.zip's is still beside p_s.zip; it moves with them to v<k>/ below)
+    beside = {f"v{k}/{DISTILLED}": out / ("" if k == replaced else f"v{k}") / FILTER_INFO for k in versions}
+    if replaced is None:
+        beside[DISTILLED] = out / FILTER_INFO
+    filters: dict[str, dict[str, Any]] = {name: json.loads(info.read_text()) for name, info in beside.items()
+                                          if info.is_file()}
+    if geometry_risk is not None:
+        filters[DISTILLED] = {"source": geometry_risk.as_posix(), "command": FILTER_COMMAND, "label": geometry_label}
     # checked before anything is written: the card needs every shipped model's (and filtered policy's) rows
     evaluations = [(folder, evaluated_policies(folder)) for folder in results or []]
     folders = [results_with(evaluations, label) if results else None for _, _, label, _ in cards]
