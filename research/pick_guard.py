@@ -1,0 +1,111 @@
+"""A camera-only guard against wasted picks: ``<policy>+pick-guard``.
+
+Replaying the shipped P+S (``p_s.zip+geometry-filter+loop-breaker``) on validation scenes at N = 10 showed
+where its time-outs come from: with one to three objects left, its Q-maps rank a pick of an object that is
+already in its class's region highest, the pick puts it back about where it was, and the episode spends
+its remaining actions there (35 of 40 actions on one sorted object in one scene; the loop breaker only moves
+the picks to neighbouring cells of the same object). The heuristics never do that: they choose among the
+objects that do not look sorted (`shelf_env.baselines.heuristics.ObservationView.sorted_cells`: a blob whose
+centroid lies in its class's region as the region tints show it).
+
+In another scene the object it re-picked straddled two regions, so that it did not look sorted, and the
+same waste followed.
+
+`PickGuard` wraps a policy whose ``predict`` takes sb3-contrib's ``action_masks`` and masks out the pick
+cells of
+
+- the objects that look sorted, by that same reading of the observation, and
+- the objects (visible blobs) that already hold ``max_picks`` of the episode's earlier pick cells: an object
+  picked that often and still there was put back where it was.
+
+Pushes are left alone (a push of a sorted object can make room). Where that would leave no allowed action
+the policy chooses as if unguarded. It reads nothing but the observation and its own picks, so a robot can
+run it; it is not learned. Its memory is per episode, cleared where ``episode_start`` is True (the
+evaluation passes it at every reset; `sb3_pixeldqn.LoopBreaker` passes it on), and it assumes that the
+action it returned last before each call was executed (a caller such as the loop breaker may ask twice a
+step). Its counters: ``guarded`` (decisions where at least one allowed pick cell was masked
+out) and ``unguarded`` (decisions where nothing allowed was left).
+
+Importing this module registers the suffix with `shelf_env.policies` (``python -m research.evaluate`` does).
+The experiment and its numbers: docs/experiments/sorted-picks.md.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from shelf_env import policies
+from shelf_env.baselines.heuristics import ObservationView
+
+#: The suffix: ``<checkpoint>+geometry-filter+pick-guard+loop-breaker`` guards the filtered policy's picks.
+PICK_GUARD = "+pick-guard"
+
+
+class PickGuard:
+    """Wrap ``policy``: pick cells of objects that look sorted, or that hold ``max_picks`` of the episode's
+    earlier picks, are masked out before it chooses (module docstring)."""
+
+    def __init__(self, policy: Any, map_names: tuple[str, ...], rows: int, cols: int, max_picks: int = 3) -> None:
+        if "pick" not in map_names:
+            raise ValueError(f"PickGuard needs a pick map; the policy's maps are {map_names}")
+        if isinstance(max_picks, bool) or not isinstance(max_picks, int) or max_picks < 1:
+            raise ValueError(f"max_picks must be an integer >= 1, got {max_picks!r}")
+        self.max_picks = max_picks
+        self._picks: list[tuple[int, int]] = []
+        self._last: tuple[int, int] | None = None
+        self.policy = policy
+        self.observation_space, self.action_space = policy.observation_space, policy.action_space
+        self.pick, self.n_maps, self.rows, self.cols = map_names.index("pick"), len(map_names), rows, cols
+        if int(self.action_space.n) != self.n_maps * rows * cols:
+            raise ValueError(f"action space {self.action_space} is not {self.n_maps} maps of {rows}x{cols}")
+        self.acts_masked = bool(getattr(policy, "acts_masked", True))
+        self.stats = {"guarded": 0, "unguarded": 0}
+
+    def guarded_cells(self, obs: np.ndarray) -> np.ndarray:
+        """Bool ``(H, W)``: the cells of the objects that look sorted in ``obs`` or hold ``max_picks`` earlier picks."""
+        view = ObservationView.from_observation(obs, margin_cells=0)
+        cells = view.sorted_cells.copy()
+        if self._picks:
+            rows, cols = np.array(self._picks).T
+            hit = view.blob[rows, cols]
+            counts = np.bincount(hit[hit >= 0], minlength=int(view.blob.max()) + 1)
+            for b in np.flatnonzero(counts >= self.max_picks):
+                cells |= view.blob == b
+        return cells
+
+    def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True, action_masks: np.ndarray | None = None) -> tuple[np.ndarray, Any]:
+        obs = np.asarray(observation)
+        if obs.shape != self.observation_space.shape:
+            raise ValueError(f"PickGuard acts on one observation of shape {self.observation_space.shape}, "
+                             f"got {obs.shape}")
+        allowed = (np.ones(int(self.action_space.n), bool) if action_masks is None
+                   else np.asarray(action_masks, bool).reshape(-1))
+        if episode_start is not None and bool(np.asarray(episode_start).reshape(-1)[0]):
+            self._picks, self._last = [], None
+        elif self._last is not None:  # the action returned last was executed (a caller may ask twice per step)
+            self._picks.append(self._last)
+        self._last = None
+        looks_sorted = self.guarded_cells(obs)
+        guarded = allowed.copy()
+        guarded.reshape(self.n_maps, self.rows, self.cols)[self.pick] &= ~looks_sorted
+        self.stats["guarded"] += int((allowed.reshape(self.n_maps, self.rows, self.cols)[self.pick]
+                                      & looks_sorted).any())
+        if not guarded.any():
+            self.stats["unguarded"] += 1
+            guarded = allowed
+        action, state = self.policy.predict(obs, state=state, deterministic=deterministic, action_masks=guarded)
+        m, rest = divmod(int(np.asarray(action).reshape(-1)[0]), self.rows * self.cols)
+        if m == self.pick:
+            self._last = divmod(rest, self.cols)
+        return action, state
+
+
+def _guarded(agent: Any, env: Any, base: str) -> PickGuard:
+    unwrapped: Any = env.unwrapped
+    return PickGuard(agent, tuple(unwrapped.map_names), unwrapped.rows, unwrapped.cols)
+
+
+policies.register_wrapper(PICK_GUARD, _guarded)
