@@ -12,7 +12,7 @@ candidate="$geo+geometry-filter+pick-guard+loop-breaker"
 step=${1:-all}
 if [[ $step == val || $step == all ]]; then
   # 1. validation: seeds 2000-2002, N = 5, 8, 11
-  python -m research.evaluate --policies "$shipped" "$candidate" --ns 5 8 11 --seeds 3 --runs 30 \
+  python -m research.evaluate --policies "$shipped" "$candidate" --ns 5,8,11 --seeds 3 --runs 30 \
       --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" \
       --reuse-cells results/fall_geometry/val90_lb
   python -m shelf_env.evaluation.compare "$out/val90" --pair p_s_geo10+geometry-filter+pick-guard+loop-breaker \
@@ -20,7 +20,7 @@ if [[ $step == val || $step == all ]]; then
 fi
 if [[ $step == heldout || $step == all ]]; then
   # 2. held-out: issue 10's seeds 0-2, N = 5, 8, 11, open loop
-  python -m research.evaluate --policies "$shipped" "$candidate" --ns 5 8 11 --seeds 3 --runs 30 \
+  python -m research.evaluate --policies "$shipped" "$candidate" --ns 5,8,11 --seeds 3 --runs 30 \
       --object-sets ycb --workers "${WORKERS:-1}" --out "$out/heldout" --reuse-cells results/models_v4/open
   python -m shelf_env.evaluation.compare "$out/heldout" --pair p_s_geo10+geometry-filter+pick-guard+loop-breaker \
       p_s_geo10+geometry-filter+loop-breaker --out "$out/heldout_pairs.md"
