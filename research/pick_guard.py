@@ -19,15 +19,16 @@ cells of
   picked that often and still there was put back where it was.
 
 Pushes are left alone (a push of a sorted object can make room). Where that would leave no allowed action
-the policy chooses as if unguarded. It reads nothing but the observation and its own picks, so a robot can
-run it; it is not learned. Its memory is per episode, cleared where ``episode_start`` is True (the
-evaluation passes it at every reset; `sb3_pixeldqn.LoopBreaker` passes it on), and it assumes that the
-action it returned last before each call was executed (a caller such as the loop breaker may ask twice a
-step). Its counters: ``guarded`` (decisions where at least one allowed pick cell was masked
-out) and ``unguarded`` (decisions where nothing allowed was left).
+the policy chooses as if unguarded. It reads nothing but the observation and the picks it returned, so a
+robot can run it; it is not learned. Its memory is per episode, cleared where ``episode_start`` is True
+(the evaluation passes it at every reset; `sb3_pixeldqn.LoopBreaker` passes it on). Every pick it returns
+counts as one: under the loop breaker, a first answer the breaker asks again about (its cell is banned, so
+that object was picked there before) counts as well as the answer that is executed. Its counters:
+``guarded`` (decisions where at least one allowed pick cell was masked out) and ``unguarded`` (decisions
+where nothing allowed was left).
 
 Importing this module registers the suffix with `shelf_env.policies` (``python -m research.evaluate`` does).
-The experiment and its numbers: docs/experiments/sorted-picks.md.
+The experiment and its numbers: docs/experiments/pick-guard.md.
 """
 
 from __future__ import annotations
@@ -54,7 +55,6 @@ class PickGuard:
             raise ValueError(f"max_picks must be an integer >= 1, got {max_picks!r}")
         self.max_picks = max_picks
         self._picks: list[tuple[int, int]] = []
-        self._last: tuple[int, int] | None = None
         self.policy = policy
         self.observation_space, self.action_space = policy.observation_space, policy.action_space
         self.pick, self.n_maps, self.rows, self.cols = map_names.index("pick"), len(map_names), rows, cols
@@ -84,10 +84,7 @@ class PickGuard:
         allowed = (np.ones(int(self.action_space.n), bool) if action_masks is None
                    else np.asarray(action_masks, bool).reshape(-1))
         if episode_start is not None and bool(np.asarray(episode_start).reshape(-1)[0]):
-            self._picks, self._last = [], None
-        elif self._last is not None:  # the action returned last was executed (a caller may ask twice per step)
-            self._picks.append(self._last)
-        self._last = None
+            self._picks = []
         looks_sorted = self.guarded_cells(obs)
         guarded = allowed.copy()
         guarded.reshape(self.n_maps, self.rows, self.cols)[self.pick] &= ~looks_sorted
@@ -99,7 +96,7 @@ class PickGuard:
         action, state = self.policy.predict(obs, state=state, deterministic=deterministic, action_masks=guarded)
         m, rest = divmod(int(np.asarray(action).reshape(-1)[0]), self.rows * self.cols)
         if m == self.pick:
-            self._last = divmod(rest, self.cols)
+            self._picks.append(divmod(rest, self.cols))
         return action, state
 
 

@@ -1,27 +1,45 @@
 #!/usr/bin/env bash
 # The pick guard (docs/experiments/pick-guard.md): the shipped P+S with and without research.pick_guard's
-# +pick-guard on validation scenes, then on issue 10's held-out scenes at N = 5, 8, 11 (open loop).
-# The shipped policy's cells are copied (by label and digest) from where they were played.
-# Usage: bash results/pick_guard/run.sh [val|heldout|all]   (WORKERS=2 for two processes)
+# +pick-guard on validation scenes, then on issue 10's held-out scenes: the whole open-loop grid, then closed
+# loop + safe picks on seed 0. The shipped policy's cells are copied (by label and digest) from where they were
+# played. Usage: bash results/pick_guard/run.sh [val|open|closed|all]   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 out=results/pick_guard
 geo=results/fall_geometry/filter/p_s_geo10.zip  # the shipped p_s.zip + its geometry risk, the label they were played as
 shipped="$geo+geometry-filter+loop-breaker"
 candidate="$geo+geometry-filter+pick-guard+loop-breaker"
+new=p_s_geo10+geometry-filter+pick-guard+loop-breaker  # the candidate's cells' label
+old=p_s_geo10+geometry-filter+loop-breaker  # the shipped policy's
+ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results/models_v3)
+others=("$ref=examples/pretrained/p_s.zip" examples/pretrained/s.zip h-d h-a)
 step=${1:-all}
 if [[ $step == val || $step == all ]]; then
   # 1. validation: seeds 2000-2002, N = 5, 8, 11
   python -m research.evaluate --policies "$shipped" "$candidate" --ns 5,8,11 --seeds 3 --runs 30 \
       --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" \
       --reuse-cells results/fall_geometry/val90_lb
-  python -m shelf_env.evaluation.compare "$out/val90" --pair p_s_geo10+geometry-filter+pick-guard+loop-breaker \
-      p_s_geo10+geometry-filter+loop-breaker --out "$out/val90_pairs.md"
+  python -m shelf_env.evaluation.compare "$out/val90" --pair $new $old --out "$out/val90_pairs.md"
 fi
-if [[ $step == heldout || $step == all ]]; then
-  # 2. held-out: issue 10's seeds 0-2, N = 5, 8, 11, open loop
-  python -m research.evaluate --policies "$shipped" "$candidate" --ns 5,8,11 --seeds 3 --runs 30 \
-      --object-sets ycb --workers "${WORKERS:-1}" --out "$out/heldout" --reuse-cells results/models_v4/open
-  python -m shelf_env.evaluation.compare "$out/heldout" --pair p_s_geo10+geometry-filter+pick-guard+loop-breaker \
-      p_s_geo10+geometry-filter+loop-breaker --out "$out/heldout_pairs.md"
+if [[ $step == open || $step == all ]]; then
+  # 2. held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
+  grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out "$out/open")
+  python -m research.evaluate --policies "$candidate" "${grid[@]}" --workers "${WORKERS:-1}"
+  python -m research.evaluate --policies "$shipped" "${others[@]}" "${grid[@]}" --reuse-cells results/models_v4/open
+  python -m research.evaluate --policies "$candidate" "$shipped" "${others[@]}" "${grid[@]}" --summarize-only
+  python -m shelf_env.evaluation.report "$out/open" --learned $new --pick-only s --heuristics h-d h-a
+  python -m shelf_env.evaluation.compare "$out/open" --pair $new $old --pair $new $ref --pair $new h-d \
+      --pair $new h-a --out "$out/open/paired.md"
+fi
+if [[ $step == closed || $step == all ]]; then
+  # 3. held-out, closed loop + safe picks: seed 0, N = 3..14
+  grid=(--ns 3-14 --runs 30 --seeds 1 --object-sets ycb --closed-loop '{}' --safe-picks --out "$out/closed_safe")
+  python -m research.evaluate --policies "$candidate" "${grid[@]}" --workers "${WORKERS:-1}"
+  python -m research.evaluate --policies "$shipped" "$ref=examples/pretrained/p_s.zip" h-d h-a "${grid[@]}" \
+      --reuse-cells results/models_v4/closed_safe
+  python -m research.evaluate --policies "$candidate" "$shipped" "$ref=examples/pretrained/p_s.zip" h-d h-a \
+      "${grid[@]}" --summarize-only
+  python -m shelf_env.evaluation.report "$out/closed_safe" --learned $new --heuristics h-d h-a
+  python -m shelf_env.evaluation.compare "$out/closed_safe" --pair $new $old --pair $new $ref --pair $new h-d \
+      --pair $new h-a --out "$out/closed_safe/paired.md"
 fi
