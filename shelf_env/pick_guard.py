@@ -27,8 +27,8 @@ that object was picked there before) counts as well as the answer that is execut
 ``guarded`` (decisions where at least one allowed pick cell was masked out) and ``unguarded`` (decisions
 where nothing allowed was left).
 
-Importing this module registers the suffix with `shelf_env.policies` (``python -m research.evaluate`` does).
-The experiment and its numbers: docs/experiments/pick-guard.md.
+`shelf_env.policies` registers the suffix: the shipped P+S is ``p_s.zip+geometry-filter+pick-guard+loop-breaker``
+(examples/pretrained/README.md). The experiment that chose it and its numbers: docs/experiments/pick-guard.md.
 """
 
 from __future__ import annotations
@@ -37,7 +37,6 @@ from typing import Any
 
 import numpy as np
 
-from shelf_env import policies
 from shelf_env.baselines.heuristics import ObservationView
 
 #: The suffix: ``<checkpoint>+geometry-filter+pick-guard+loop-breaker`` guards the filtered policy's picks.
@@ -98,11 +97,3 @@ class PickGuard:
         if m == self.pick:
             self._picks.append(divmod(rest, self.cols))
         return action, state
-
-
-def _guarded(agent: Any, env: Any, base: str) -> PickGuard:
-    unwrapped: Any = env.unwrapped
-    return PickGuard(agent, tuple(unwrapped.map_names), unwrapped.rows, unwrapped.cols)
-
-
-policies.register_wrapper(PICK_GUARD, _guarded)
