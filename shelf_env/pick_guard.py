@@ -1,15 +1,13 @@
 """A camera-only guard against wasted picks: ``<policy>+pick-guard``.
 
-Replaying the shipped P+S (``p_s.zip+geometry-filter+loop-breaker``) on validation scenes at N = 10 showed
-where its time-outs come from: with one to three objects left, its Q-maps rank a pick of an object that is
-already in its class's region highest, the pick puts it back about where it was, and the episode spends
-its remaining actions there (35 of 40 actions on one sorted object in one scene; the loop breaker only moves
-the picks to neighbouring cells of the same object). The heuristics never do that: they choose among the
-objects that do not look sorted (`shelf_env.baselines.heuristics.ObservationView.sorted_cells`: a blob whose
-centroid lies in its class's region as the region tints show it).
-
-In another scene the object it re-picked straddled two regions, so that it did not look sorted, and the
-same waste followed.
+Replayed on validation scenes at N = 10, the P+S shipped before this guard
+(``p_s.zip+geometry-filter+loop-breaker``) ran out of actions like this: with one to three objects left, its Q-maps
+ranked a pick of an object already in its class's region highest, the pick put it back about where it was, and the
+episode spent its remaining actions there (35 of 40 actions on one sorted object in one scene; the loop breaker
+only moved the picks to neighbouring cells of the same object). In another scene the object it re-picked straddled
+two regions, so that it did not look sorted, and the same waste followed. The heuristics never pick an object that
+looks sorted (`shelf_env.baselines.heuristics.ObservationView.sorted_cells`: a blob whose centroid lies in its
+class's region as the region tints show it).
 
 `PickGuard` wraps a policy whose ``predict`` takes sb3-contrib's ``action_masks`` and masks out the pick
 cells of
