@@ -323,6 +323,11 @@ def _geometry_filtered(agent: Any, env: gym.Env, base: str) -> FallFilter:
                       unwrapped.cols)
 
 
+def _pick_guarded(agent: Any, env: gym.Env, base: str) -> PickGuard:
+    unwrapped: Any = env.unwrapped
+    return PickGuard(agent, tuple(unwrapped.map_names), unwrapped.rows, unwrapped.cols)
+
+
 register_policy("h-d", lambda env, seed: DistanceHeuristic(env))
 register_policy("h-a", lambda env, seed: AccessibilityHeuristic(env))
 # privileged diagnostics (they read the simulator), not baselines: shelf_env.privileged.lookahead
@@ -335,5 +340,4 @@ register_wrapper(LOOP_BREAKER, lambda agent, env, base: LoopBreaker(agent))
 register_wrapper(GEOMETRY_FILTER, _geometry_filtered, check=_check_geometry,
                  files=lambda base: [geometry_risk_path(base)])
 # a camera-only guard against wasted picks (shelf_env.pick_guard): the shipped P+S plays under it after the filter
-register_wrapper(PICK_GUARD, lambda agent, env, base: PickGuard(agent, tuple(env.unwrapped.map_names),
-                                                                 env.unwrapped.rows, env.unwrapped.cols))
+register_wrapper(PICK_GUARD, _pick_guarded)
