@@ -5,9 +5,10 @@ add to a decision of the shipped P+S.
 
 The model defaults to the shipped ``examples/pretrained/p_s.zip``, played as its card says: under the
 `GeometryRisk` beside it (``p_s.geometry_risk.pt``), the `PickGuard` and `sb3_pixeldqn.LoopBreaker`. For each N it
-takes the first observation of ``--decisions`` YCB scenes (evaluation seed 0's) and times the bare model's masked greedy ``predict``
-and the wrapped policy's on the same observations (each after one warm-up call). It prints both per decision, their
-ratio, and one env action's cost from those states, so that the share the filter adds to an episode shows.
+takes the first observation of ``--decisions`` YCB scenes (evaluation seed 0's) and times the bare model's masked
+greedy ``predict`` and the wrapped policy's on the same observations (each after one warm-up call). It prints both per
+decision, their ratio, and one env action's cost from those states, so that the share the wrappers add to an episode
+shows.
 """
 
 from __future__ import annotations
