@@ -1,12 +1,14 @@
-"""What the geometry pick filter (`shelf_env.fall_filter`) and the loop breaker add to a decision of the shipped P+S.
+"""What the geometry pick filter (`shelf_env.fall_filter`), the pick guard (`shelf_env.pick_guard`) and the loop breaker
+add to a decision of the shipped P+S.
 
     python benchmarks/filter_cost.py [MODEL.zip] [--ns 5 8 11] [--decisions 20] [--threads 1]
 
 The model defaults to the shipped ``examples/pretrained/p_s.zip``, played as its card says: under the
-`GeometryRisk` beside it (``p_s.geometry_risk.pt``) and `sb3_pixeldqn.LoopBreaker`. For each N it takes the first
-observation of ``--decisions`` YCB scenes (evaluation seed 0's) and times the bare model's masked greedy ``predict``
-and the wrapped policy's on the same observations (each after one warm-up call). It prints both per decision, their
-ratio, and one env action's cost from those states, so that the share the filter adds to an episode shows.
+`GeometryRisk` beside it (``p_s.geometry_risk.pt``), the `PickGuard` and `sb3_pixeldqn.LoopBreaker`. For each N it
+takes the first observation of ``--decisions`` YCB scenes (evaluation seed 0's) and times the bare model's masked
+greedy ``predict`` and the wrapped policy's on the same observations (each after one warm-up call). It prints both per
+decision, their ratio, and one env action's cost from those states, so that the share the wrappers add to an episode
+shows.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import shelf_env  # noqa: E402, F401  (registers ShelfSort-v0)
 from benchmarks.timing import first_states, seconds_per_action, seconds_per_call  # noqa: E402
+from shelf_env.pick_guard import PICK_GUARD  # noqa: E402
 from shelf_env.policies import LOOP_BREAKER, checkpoint_pixel_size, make_policy  # noqa: E402
 
 SHIPPED = "examples/pretrained/p_s.zip"
@@ -55,11 +58,11 @@ def main() -> None:
     p.add_argument("--threads", type=int, default=1, help="torch threads")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
-    filtered = f"{args.model}+geometry-filter{LOOP_BREAKER}"
+    filtered = f"{args.model}+geometry-filter{PICK_GUARD}{LOOP_BREAKER}"
     print(f"{args.model} alone and as {filtered}: {args.decisions} decisions per N, {args.threads} torch thread(s)")
     for n in args.ns:
         one, both, step = measure(args.model, filtered, n, args.decisions)
-        print(f"N = {n:2d}: the model {one * 1e3:6.1f} ms, with the filter and the loop breaker {both * 1e3:6.1f} ms "
+        print(f"N = {n:2d}: the model {one * 1e3:6.1f} ms, with the wrappers {both * 1e3:6.1f} ms "
               f"per decision, {both / one:4.1f}x; one env action {step * 1e3:6.0f} ms (filtered decision + action "
               f"{(both + step) / (one + step):4.2f}x the model's)", flush=True)
 

@@ -35,6 +35,7 @@ from shelf_env import params
 from shelf_env.baselines.heuristics import AccessibilityHeuristic, DistanceHeuristic, RandomPolicy
 from shelf_env.fall_filter import GEOMETRY_FILTER, FallFilter, GeometryRisk, geometry_risk_path
 from shelf_env.files import write_json_atomically
+from shelf_env.pick_guard import PICK_GUARD, PickGuard
 from shelf_env.privileged.lookahead import LookaheadAccessibility, LookaheadDistance
 from shelf_env.privileged.planning import PlanningTeacher
 
@@ -322,6 +323,11 @@ def _geometry_filtered(agent: Any, env: gym.Env, base: str) -> FallFilter:
                       unwrapped.cols)
 
 
+def _pick_guarded(agent: Any, env: gym.Env, base: str) -> PickGuard:
+    unwrapped: Any = env.unwrapped
+    return PickGuard(agent, tuple(unwrapped.map_names), unwrapped.rows, unwrapped.cols)
+
+
 register_policy("h-d", lambda env, seed: DistanceHeuristic(env))
 register_policy("h-a", lambda env, seed: AccessibilityHeuristic(env))
 # privileged diagnostics (they read the simulator), not baselines: shelf_env.privileged.lookahead
@@ -333,3 +339,5 @@ register_wrapper(LOOP_BREAKER, lambda agent, env, base: LoopBreaker(agent))
 # a camera-only pick filter (shelf_env.fall_filter): the shipped P+S plays under it, then the loop breaker
 register_wrapper(GEOMETRY_FILTER, _geometry_filtered, check=_check_geometry,
                  files=lambda base: [geometry_risk_path(base)])
+# a camera-only guard against wasted picks (shelf_env.pick_guard): the shipped P+S plays under it after the filter
+register_wrapper(PICK_GUARD, _pick_guarded)

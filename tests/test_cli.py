@@ -71,15 +71,15 @@ def test_demo_overlays_the_model_q_maps_under_the_loop_breaker():
     q_bare, q_wrapped = demo.q_map_values_of(bare)(obs), demo.q_map_values_of(wrapped)(obs)
     assert q_wrapped.shape == (3, 40, 60)  # pick, push right, push left at 1 cm cells
     np.testing.assert_allclose(q_wrapped, q_bare)  # the same weights, read through the breaker
-    shipped = ev.make_policy(name + "+geometry-filter" + ev.LOOP_BREAKER, env)  # as the card says to play it
-    np.testing.assert_allclose(demo.q_map_values_of(shipped)(obs), q_bare)  # through the breaker and the filter
+    shipped = ev.make_policy(name + "+geometry-filter+pick-guard" + ev.LOOP_BREAKER, env)  # as the card says
+    np.testing.assert_allclose(demo.q_map_values_of(shipped)(obs), q_bare)  # through the breaker, guard and filter
     assert demo.q_map_values_of(ev.make_policy("h-d", env)) is None
     env.close()
 
 
 def test_demo_defaults_to_the_shipped_policy_as_its_card_says_to_play_it(tmp_path, monkeypatch):
     shelf = demo.pathlib.Path(__file__).parents[1] / "examples" / "pretrained"
-    assert demo.default_policy().endswith("examples/pretrained/p_s.zip+geometry-filter+loop-breaker")
+    assert demo.default_policy().endswith("examples/pretrained/p_s.zip+geometry-filter+pick-guard+loop-breaker")
     # a policy whose files are not all there is passed over for the next: here the filter's risk is missing
     (tmp_path / "a").mkdir()
     shutil.copy(shelf / "p_s.zip", tmp_path / "a" / "p_s.zip")

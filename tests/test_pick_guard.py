@@ -1,4 +1,4 @@
-"""research/pick_guard.py: ``+pick-guard`` masks the picks of objects that look sorted and of objects the episode
+"""shelf_env/pick_guard.py: ``+pick-guard`` masks the picks of objects that look sorted and of objects the episode
 has already picked ``max_picks`` times, remembers only the picks that were executed, forgets at an episode's
 start, stands aside when nothing allowed is left, and composes with the geometry filter and the loop breaker."""
 
@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from research.pick_guard import PICK_GUARD, PickGuard
 from sb3_pixeldqn.loop_breaker import LoopBreaker
 from shelf_env import params, policies
 from shelf_env.camera.heightmap import CLASS_RGB, REGION_RGB
+from shelf_env.pick_guard import PICK_GUARD, PickGuard
 
 H, W, MAPS = 40, 60, 3
 

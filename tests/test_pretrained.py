@@ -66,9 +66,15 @@ FILTERS = sorted(PRETRAINED.rglob("*.geometry_risk.pt"))
 
 
 def test_the_shipped_p_s_plays_under_its_geometry_filter_as_its_card_says():
-    """The shelf's p_s.zip ships with its camera-only pick filter: the policy the card names loads from the
-    registry alone and acts within the masks, playing no pick the filter masks while a kept one is allowed."""
+    """The shelf's p_s.zip ships with its camera-only pick filter and pick guard: the policy the card names loads
+    from the registry alone and acts within the masks, playing no pick the filter masks while a kept one is
+    allowed, and no pick of an object that looks sorted while another allowed action is left."""
+    import json
+
+    from shelf_env.baselines.heuristics import ObservationView
     from shelf_env.fall_filter import FallFilter
+    from shelf_env.pick_guard import PICK_GUARD
+    from shelf_env.training.model_card import filtered_name
     from shelf_env.training.ship import FILTER_INFO, FILTER_RISK
 
     assert PRETRAINED / FILTER_RISK in FILTERS  # the P+S to use is the filtered one
@@ -76,13 +82,17 @@ def test_the_shipped_p_s_plays_under_its_geometry_filter_as_its_card_says():
     for risk in FILTERS:
         zip_path = risk.with_name(DISTILLED)
         assert zip_path.is_file() and risk.with_name(FILTER_INFO).is_file()
-        name = f"{zip_path.relative_to(PRETRAINED.parents[1]).as_posix()}+geometry-filter+loop-breaker"
+        label = json.loads(risk.with_name(FILTER_INFO).read_text())["label"]
+        name = filtered_name(zip_path.relative_to(PRETRAINED.parents[1]), label)
         assert f'make_policy("{name}", env)' in card
+        guarded = PICK_GUARD in name
+        assert guarded or risk != PRETRAINED / FILTER_RISK  # the shelf's P+S to use plays under the pick guard
         env = gym.make("ShelfSort-v0", num_objects=5, primitives=ev.checkpoint_primitives(zip_path),
                        pixel_size=ev.checkpoint_pixel_size(zip_path))
         policy = ev.make_policy(str(PRETRAINED.parents[1] / name), env)
         filt = policy.policy
-        assert isinstance(filt, FallFilter)
+        while not isinstance(filt, FallFilter):
+            filt = filt.policy
         obs, _ = env.reset(seed=ev.scene_seed(7, 5, 0))
         first = True
         for _ in range(4):
@@ -92,7 +102,14 @@ def test_the_shipped_p_s_plays_under_its_geometry_filter_as_its_card_says():
             action = int(np.asarray(chosen).reshape(-1)[0])
             first = False
             assert masks[action]
-            if action < risky.size and (masks[:risky.size] & ~risky).any():
+            picks = risky.size  # the pick map comes first: actions below it are picks
+            looks_sorted = ObservationView.from_observation(obs, margin_cells=0).sorted_cells.reshape(-1)
+            unguarded = masks.copy()
+            if guarded:
+                unguarded[:picks] &= ~looks_sorted
+                if unguarded.any():
+                    assert action >= picks or not looks_sorted[action]
+            if action < picks and (unguarded[:picks] & ~risky).any():
                 assert not risky[action]
             obs, _, terminated, truncated, _ = env.step(action)
             if terminated or truncated:

@@ -24,11 +24,12 @@ def test_the_first_screen_says_what_how_and_the_result() -> None:
     assert "bash scripts/demo.sh" in first and "bash scripts/test.sh" in first
     assert "+31.7" in first and "| H-a |" in first
     # the headline margin is the committed §V verdict of the report the headline names
-    margin = re.search(r"the shipped P\+S is \*\*−(\d+\.\d)\*\*", first)
+    margin = re.search(r"the shipped P\+S is \*\*([+−])(\d+\.\d)\*\*", first)
     named = re.search(r"`(results/models_v\d+/open/report\.md)`", first)
     assert margin and named, "the headline names its margin and its report"
     report = (ROOT / named.group(1)).read_text()
-    assert f"averaged over N = 3..14: -{margin.group(1)} SR points" in report
+    sign = "+" if margin.group(1) == "+" else "-"
+    assert f"averaged over N = 3..14: {sign}{margin.group(2)} SR points" in report
 
 
 @pytest.mark.parametrize("index", range(len(BLOCKS)))

@@ -195,9 +195,12 @@ def test_a_distilled_p_s_ships_with_its_geometry_filter_which_moves_with_it_when
     args = ["--training", str(finished_run), "--out", str(out), "--distilled", str(first), "--geometry-risk", str(risk)]
     assert main(args) == 2
     assert "needs --geometry-label: the label its evaluations gave the filtered policy (e.g. " \
-        "NAME+geometry-filter+loop-breaker)" in capsys.readouterr().out
-    assert main([*args, "--geometry-label", "nope", "--results", str(results)]) == 2
-    assert "no rows of ['nope']" in capsys.readouterr().out
+        "NAME+geometry-filter+pick-guard+loop-breaker)" in capsys.readouterr().out
+    assert main([*args, "--geometry-label", "geo+loop-breaker", "--results", str(results)]) == 2
+    assert "'geo+loop-breaker' is not the label of a policy played under +geometry-filter and then any of " \
+        "+pick-guard, +loop-breaker" in capsys.readouterr().out
+    assert main([*args, "--geometry-label", "nope+geometry-filter", "--results", str(results)]) == 2
+    assert "no rows of ['nope+geometry-filter']" in capsys.readouterr().out
     other = geometry_risk(first, tmp_path / "o.pt", shape=(4, 8, 8))
     assert main([*args[:-1], str(other), "--geometry-label", "geo+geometry-filter+loop-breaker"]) == 2
     assert "was fitted on observations of shape (4, 8, 8)" in capsys.readouterr().out
@@ -223,16 +226,31 @@ def test_a_distilled_p_s_ships_with_its_geometry_filter_which_moves_with_it_when
     # shipping a run again keeps the filter and its card
     ship(["p_s"], finished_run, out, [results])
     assert "`p_s.zip+geometry-filter+loop-breaker` is the P+S to use" in (out / "README.md").read_text()
+    # re-shipped under the label of the policy with the pick guard: the card names and describes that policy
+    guarded = tmp_path / "eval2"
+    guarded.mkdir()
+    (guarded / "results.csv").write_text((results / "results.csv").read_text()
+                                         + "geo+geometry-filter+pick-guard+loop-breaker,ycb,3,97.0,1.0,1.2,0.9\n")
+    ship(None, finished_run, out, [guarded], None, risk, "geo+geometry-filter+pick-guard+loop-breaker")
+    card = (out / "README.md").read_text()
+    name = f"{(out / 'p_s.zip').as_posix()}+geometry-filter+pick-guard+loop-breaker"
+    assert "`p_s.zip+geometry-filter+pick-guard+loop-breaker` is the P+S to use: the Q-maps of `p_s.zip` played " \
+        "under a camera-only pick filter (`p_s.geometry_risk.pt`, `shelf_env.fall_filter`), the pick guard " \
+        "(`shelf_env.pick_guard`) and the loop breaker (`sb3_pixeldqn.LoopBreaker`)." in card
+    assert "## The policy to use: under the geometry pick filter, the pick guard and the loop breaker" in card
+    assert f'policy = make_policy("{name}", env)' in card and "then `shelf_env.pick_guard.PickGuard`" in card
+    assert "this policy is `geo+geometry-filter+pick-guard+loop-breaker` there" in card
+    assert policies.check_policy(name) == ("pick", "push")
     # a new p_s.zip (other bytes, no filter) moves the filtered one to v2/ with its filter: p_s.zip is unfiltered
     second = distillation(finished_run, tmp_path / "b", name="p_s_dagger9_avg2", init=str(out / "v1" / "p_s.zip"))
     model = PixelDoubleDQN.load(second)
     model.num_timesteps += 1
     model.save(second)
-    ship(None, finished_run, out, [results], second)
+    ship(None, finished_run, out, [guarded], second)
     assert (out / "v2" / "p_s.geometry_risk.pt").read_bytes() == risk.read_bytes()
     assert (out / "v2" / "p_s.geometry_risk.json").is_file()
     assert not (out / "p_s.geometry_risk.pt").exists() and not (out / "p_s.geometry_risk.json").exists()
     card = (out / "README.md").read_text()
     assert "`p_s.zip` is the P+S to use" in card and "geometry-filter+loop-breaker` is the P+S to use" not in card
-    assert f'make_policy("{(out / "v2" / "p_s.zip").as_posix()}+geometry-filter+loop-breaker", env)' in card
+    assert f'make_policy("{(out / "v2" / "p_s.zip").as_posix()}+geometry-filter+pick-guard+loop-breaker", env)' in card
     assert card.count("## The policy to use: under the geometry pick filter") == 1

@@ -32,9 +32,10 @@ from shelf_env.files import write_atomically
 from shelf_env.policies import policy_files, policy_wrappers
 
 #: The policy shelf-demo shows by default: the shipped P+S as examples/pretrained/README.md says to play it (under its
-#: geometry pick filter and the loop breaker), else the shipped P+S alone, else the best committed checkpoint.
-DEFAULT_POLICIES = ("examples/pretrained/p_s.zip+geometry-filter+loop-breaker", "examples/pretrained/p_s.zip",
-                    "results/learning/recipe_n3.zip")
+#: geometry pick filter, the pick guard and the loop breaker), else the shipped P+S alone, else the best committed
+#: checkpoint.
+DEFAULT_POLICIES = ("examples/pretrained/p_s.zip+geometry-filter+pick-guard+loop-breaker",
+                    "examples/pretrained/p_s.zip", "results/learning/recipe_n3.zip")
 PANEL = (400, 300)  # width, height of each panel
 PRIMITIVE_LABEL = {"pick": "pick-and-place", "push_left": "push left", "push_right": "push right"}
 

@@ -29,7 +29,8 @@ from typing import Any
 
 from shelf_env.fall_filter import GEOMETRY_FILTER, GeometryRisk, geometry_risk_path
 from shelf_env.files import write_text_atomically
-from shelf_env.policies import LOOP_BREAKER, checkpoint_pixel_size, checkpoint_primitives
+from shelf_env.pick_guard import PICK_GUARD
+from shelf_env.policies import LOOP_BREAKER, checkpoint_pixel_size, checkpoint_primitives, policy_wrappers
 
 
 def stage_times(run: pathlib.Path, history: list[list[int]]) -> list[tuple[int, int, float | None]]:
@@ -98,19 +99,45 @@ def evaluation_section(results: pathlib.Path, label: str, heading: str = "## Eva
             evaluation_table(results, label)]
 
 
-def filtered_name(zip_path: pathlib.Path | str) -> str:
-    """The policy name a checkpoint is played as under the geometry pick filter beside it and the loop breaker."""
-    return f"{pathlib.PurePath(zip_path).as_posix()}{GEOMETRY_FILTER}{LOOP_BREAKER}"
+#: What each wrapper of a filtered policy does, as its card says it.
+WRAPPER_TEXT = {
+    PICK_GUARD: "`shelf_env.pick_guard.PickGuard` (it masks the picks of the objects that look sorted and of those "
+                "the episode has already picked three times)",
+    LOOP_BREAKER: "`sb3_pixeldqn.LoopBreaker` (it bans the cells the episode has acted at too often)",
+}
+WRAPPER_NAME = {GEOMETRY_FILTER: "the geometry pick filter", PICK_GUARD: "the pick guard",
+                LOOP_BREAKER: "the loop breaker"}
+WRAPPER_HOME = {PICK_GUARD: "`shelf_env.pick_guard`", LOOP_BREAKER: "`sb3_pixeldqn.LoopBreaker`"}
+
+
+def filter_wrappers(label: str) -> tuple[str, ...]:
+    """The wrappers of a filtered policy's ``label`` in evaluations, innermost first: ``+geometry-filter``, then any of
+    `WRAPPER_TEXT`'s; a `ValueError` naming the label otherwise."""
+    _, wrappers = policy_wrappers(label)
+    if not wrappers or wrappers[0] != GEOMETRY_FILTER or any(w not in WRAPPER_TEXT for w in wrappers[1:]):
+        raise ValueError(f"{label!r} is not the label of a policy played under {GEOMETRY_FILTER} and then any of "
+                         f"{', '.join(WRAPPER_TEXT)} (e.g. NAME{GEOMETRY_FILTER}{PICK_GUARD}{LOOP_BREAKER})")
+    return wrappers
+
+
+def filtered_name(zip_path: pathlib.Path | str, label: str) -> str:
+    """The policy name a checkpoint is played as under the geometry pick filter beside it and the wrappers after it
+    that ``label`` (that policy's label in evaluations) names: ``<zip>+geometry-filter+pick-guard+loop-breaker``."""
+    return pathlib.PurePath(zip_path).as_posix() + "".join(filter_wrappers(label))
 
 
 def filter_section(info: dict[str, Any], zip_path: pathlib.Path, results: pathlib.Path | None) -> list[str]:
-    """The card's part on playing ``zip_path`` under the `shelf_env.fall_filter.GeometryRisk` beside it and the loop
-    breaker, from what shipped it (``info``: the risk's ``source`` file, the ``command`` that made it and its
-    ``label`` in evaluations), with that policy's evaluation rows from ``results``."""
+    """The card's part on playing ``zip_path`` under the `shelf_env.fall_filter.GeometryRisk` beside it and the
+    wrappers its label names, from what shipped it (``info``: the risk's ``source`` file, the ``command`` that made it
+    and its ``label`` in evaluations), with that policy's evaluation rows from ``results``."""
     risk = geometry_risk_path(zip_path)
     threshold = GeometryRisk.load(risk).threshold
-    name = filtered_name(zip_path)
-    out = ["", "## The policy to use: under the geometry pick filter and the loop breaker", "",
+    wrappers = filter_wrappers(str(info["label"]))
+    name = filtered_name(zip_path, str(info["label"]))
+    names = [WRAPPER_NAME[w] for w in wrappers]
+    under = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+    after = "".join(f", then {WRAPPER_TEXT[w]}" for w in wrappers[1:])
+    out = ["", f"## The policy to use: under {under}", "",
            "```python",
            "from shelf_env.policies import make_policy",
            f'policy = make_policy("{name}", env)   # env as above',
@@ -119,10 +146,9 @@ def filter_section(info: dict[str, Any], zip_path: pathlib.Path, results: pathli
            "```", "",
            f"The Q-maps above with the pick cells whose predicted fall risk is at least {threshold:g} masked out "
            f"(`shelf_env.fall_filter.FallFilter`; the risk `{risk.as_posix()}` is a `GeometryRisk`: an MLP on named "
-           "carry geometry read from the camera observation alone), then `sb3_pixeldqn.LoopBreaker` (it bans the "
-           "cells the episode has acted at too often). The risk: `" + str(info["command"]) + "`, its line that "
-           f"writes `{info['source']}` (docs/experiments/fall-geometry.md). Evaluations and `shelf-demo` name this "
-           f"policy `{name}`."]
+           f"carry geometry read from the camera observation alone){after}. The risk: `" + str(info["command"])
+           + f"`, its line that writes `{info['source']}` (docs/experiments/fall-geometry.md). Evaluations and "
+           f"`shelf-demo` name this policy `{name}`."]
     if results is not None:
         out += evaluation_section(results, str(info["label"]), "### Its evaluation", ("this policy", "its"))
     return out

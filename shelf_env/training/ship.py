@@ -4,7 +4,7 @@
     python -m shelf_env.training.ship --distilled runs/distill_scaling/NAME.zip \\
         --results results/models_v2 results/models    # a distilled P+S as p_s.zip, the cards' tables
     python -m shelf_env.training.ship --geometry-risk results/fall_geometry/filter/p_s_geo10.geometry_risk.pt \\
-        --geometry-label p_s_geo10+geometry-filter+loop-breaker --results ...   # the shelf's p_s.zip, filtered
+        --geometry-label p_s_geo10+geometry-filter+pick-guard+loop-breaker --results ...   # p_s.zip, filtered
     bash scripts/ship_models.sh                  # the same, with the evaluations when there are some
 
 The shelf holds the P+S to use, ``p_s.zip``: since 2026-12-04 a P+S distilled from the teacher dataset
@@ -17,7 +17,8 @@ moves, with its report, to the first free ``v<k>/`` (k >= 2), and keeps its card
 A distilled ``p_s.zip`` may ship with a camera-only pick filter beside it (``--geometry-risk``: a
 `shelf_env.fall_filter.GeometryRisk`, copied as ``p_s.geometry_risk.pt``, with ``p_s.geometry_risk.json`` saying where
 it came from and under which label evaluations played it, ``--geometry-label``): the policy to use is then
-``p_s.zip+geometry-filter+loop-breaker`` (`shelf_env.policies`), and the card says so with that policy's
+``p_s.zip`` under the filter and the wrappers after it that the label names (since 2026-12-05
+``p_s.zip+geometry-filter+pick-guard+loop-breaker``, `shelf_env.policies`), and the card says so with that policy's
 evaluation. The filter was evaluated with those Q-maps, so it moves with them to ``v<k>/`` when a new
 ``p_s.zip`` replaces them.
 
@@ -44,10 +45,19 @@ from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env.evaluation.protocol import checkpoint_primitives
 from shelf_env.fall_filter import GEOMETRY_FILTER, GeometryRisk, geometry_risk_path
 from shelf_env.files import copy_atomically, write_json_atomically, write_text_atomically
+from shelf_env.pick_guard import PICK_GUARD
 from shelf_env.policies import LOOP_BREAKER
 from shelf_env.training.config import PRESETS
 from shelf_env.training.distill import report_path
-from shelf_env.training.model_card import distilled_card, filtered_name, model_card, model_cards
+from shelf_env.training.model_card import (
+    WRAPPER_HOME,
+    WRAPPER_NAME,
+    distilled_card,
+    filter_wrappers,
+    filtered_name,
+    model_card,
+    model_cards,
+)
 
 #: The runs that ship, by the name of their preset and run (the preset gives the layout's primitives), and
 #: where each goes on the shelf: the RL-trained P+S was ``p_s.zip`` until the distilled one replaced it.
@@ -66,10 +76,15 @@ HEAD = ("`p_s.zip` {what}: distilled from the teacher dataset into the Q-maps of
 FILTER_RISK = geometry_risk_path(DISTILLED).name
 FILTER_INFO = pathlib.Path(FILTER_RISK).with_suffix(".json").name
 FILTER_COMMAND = "bash results/fall_geometry/run.sh"
-#: The head when the shelf's p_s.zip ships with its filter: the policy to use is the filtered one.
-FILTERED_HEAD = (f"`{filtered_name(DISTILLED)}` is the P+S to use: the Q-maps of `p_s.zip` played under a camera-only "
-                 f"pick filter (`{FILTER_RISK}`, `shelf_env.fall_filter`) and the loop breaker "
-                 "(`sb3_pixeldqn.LoopBreaker`). ")
+
+
+def filtered_head(label: str) -> str:
+    """The head when the shelf's p_s.zip ships with its filter, played as ``label`` says: the policy to use is that."""
+    wrappers = filter_wrappers(label)
+    parts = [f"a camera-only pick filter (`{FILTER_RISK}`, `shelf_env.fall_filter`)"]
+    parts += [f"{WRAPPER_NAME[w]} ({WRAPPER_HOME[w]})" for w in wrappers[1:]]
+    return (f"`{filtered_name(DISTILLED, label)}` is the P+S to use: the Q-maps of `p_s.zip` played under "
+            + (parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]) + ". ")
 #: What the head adds when earlier distilled P+S are on the shelf (``v<k>/``, k >= 2).
 ARCHIVE_HEAD = (" The distilled P+S that `p_s.zip` replaced stay here, each in `v<k>/` with its report and card ({}); "
                 "results name each distilled model by its distillation's name.")
@@ -175,7 +190,8 @@ def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
                              "--distilled)")
         if not geometry_label:
             raise ValueError("--geometry-risk needs --geometry-label: the label its evaluations gave the filtered "
-                             f"policy (e.g. NAME{GEOMETRY_FILTER}{LOOP_BREAKER})")
+                             f"policy (e.g. NAME{GEOMETRY_FILTER}{PICK_GUARD}{LOOP_BREAKER})")
+        filter_wrappers(geometry_label)
         check_geometry_risk(geometry_risk, target)
     replaced = replaced_version(out, distilled) if distilled is not None else None
     versions = ([replaced] if replaced else []) + archived(out)  # the earlier distilled P+S, newest first
@@ -230,8 +246,8 @@ def ship(models: list[str] | None, training: pathlib.Path, out: pathlib.Path,
         head = ""
         if cards[0][0] == DISTILLED:
             filtered = DISTILLED in filters
-            head = (FILTERED_HEAD if filtered else "") + HEAD.format(what="holds its Q-maps" if filtered
-                                                                     else "is the P+S to use")
+            head = (filtered_head(filters[DISTILLED]["label"]) if filtered else "") \
+                + HEAD.format(what="holds its Q-maps" if filtered else "is the P+S to use")
             head += ARCHIVE_HEAD.format(", ".join(f"`v{k}/`" for k in versions)) if versions else ""
         write_text_atomically(out / "README.md", model_cards(texts, head))
     return shipped

@@ -1,15 +1,13 @@
 """A camera-only guard against wasted picks: ``<policy>+pick-guard``.
 
-Replaying the shipped P+S (``p_s.zip+geometry-filter+loop-breaker``) on validation scenes at N = 10 showed
-where its time-outs come from: with one to three objects left, its Q-maps rank a pick of an object that is
-already in its class's region highest, the pick puts it back about where it was, and the episode spends
-its remaining actions there (35 of 40 actions on one sorted object in one scene; the loop breaker only moves
-the picks to neighbouring cells of the same object). The heuristics never do that: they choose among the
-objects that do not look sorted (`shelf_env.baselines.heuristics.ObservationView.sorted_cells`: a blob whose
-centroid lies in its class's region as the region tints show it).
-
-In another scene the object it re-picked straddled two regions, so that it did not look sorted, and the
-same waste followed.
+Replayed on validation scenes at N = 10, the P+S shipped before this guard
+(``p_s.zip+geometry-filter+loop-breaker``) ran out of actions like this: with one to three objects left, its Q-maps
+ranked a pick of an object already in its class's region highest, the pick put it back about where it was, and the
+episode spent its remaining actions there (35 of 40 actions on one sorted object in one scene; the loop breaker
+only moved the picks to neighbouring cells of the same object). In another scene the object it re-picked straddled
+two regions, so that it did not look sorted, and the same waste followed. The heuristics never pick an object that
+looks sorted (`shelf_env.baselines.heuristics.ObservationView.sorted_cells`: a blob whose centroid lies in its
+class's region as the region tints show it).
 
 `PickGuard` wraps a policy whose ``predict`` takes sb3-contrib's ``action_masks`` and masks out the pick
 cells of
@@ -27,8 +25,8 @@ that object was picked there before) counts as well as the answer that is execut
 ``guarded`` (decisions where at least one allowed pick cell was masked out) and ``unguarded`` (decisions
 where nothing allowed was left).
 
-Importing this module registers the suffix with `shelf_env.policies` (``python -m research.evaluate`` does).
-The experiment and its numbers: docs/experiments/pick-guard.md.
+`shelf_env.policies` registers the suffix: the shipped P+S is ``p_s.zip+geometry-filter+pick-guard+loop-breaker``
+(examples/pretrained/README.md). The experiment that chose it and its numbers: docs/experiments/pick-guard.md.
 """
 
 from __future__ import annotations
@@ -37,7 +35,6 @@ from typing import Any
 
 import numpy as np
 
-from shelf_env import policies
 from shelf_env.baselines.heuristics import ObservationView
 
 #: The suffix: ``<checkpoint>+geometry-filter+pick-guard+loop-breaker`` guards the filtered policy's picks.
@@ -98,11 +95,3 @@ class PickGuard:
         if m == self.pick:
             self._picks.append(divmod(rest, self.cols))
         return action, state
-
-
-def _guarded(agent: Any, env: Any, base: str) -> PickGuard:
-    unwrapped: Any = env.unwrapped
-    return PickGuard(agent, tuple(unwrapped.map_names), unwrapped.rows, unwrapped.cols)
-
-
-policies.register_wrapper(PICK_GUARD, _guarded)
