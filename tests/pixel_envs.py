@@ -1,4 +1,5 @@
-"""Tiny synthetic image envs with a known best pixel, for testing sb3_pixeldqn without physics."""
+"""Tiny synthetic image envs with a known best pixel, for testing sb3_pixeldqn without physics, and a fixed-score
+pixel policy for testing test-time wrappers."""
 
 from __future__ import annotations
 
@@ -130,3 +131,17 @@ class SquareSupervisor(gym.Wrapper):
                       "terminated": True}
             info = {**info, "correction": report if self.report is None else self.report(report)}
         return obs, reward, terminated, truncated, info
+
+
+class ScoresPolicy:
+    """A greedy pixel policy over fixed scores that honours masks (as a PixelDoubleDQN does), acting on
+    observations of ``obs_shape`` (C, H, W); ``scores`` holds one value per action (``n_maps * H * W``)."""
+
+    def __init__(self, scores: np.ndarray, obs_shape: tuple[int, int, int]) -> None:
+        self.scores = np.asarray(scores, float).reshape(-1)
+        self.observation_space = gym.spaces.Box(0, 255, obs_shape, np.uint8)
+        self.action_space = gym.spaces.Discrete(self.scores.size)
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True, action_masks=None):
+        masks = np.ones(self.scores.size, bool) if action_masks is None else np.asarray(action_masks, bool)
+        return np.array(int(np.where(masks, self.scores, -np.inf).argmax())), state

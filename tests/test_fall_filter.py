@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from gymnasium import spaces
+from pixel_envs import ScoresPolicy
 
 from sb3_pixeldqn import PixelDoubleDQN
 from sb3_pixeldqn.loop_breaker import LoopBreaker
@@ -99,18 +99,9 @@ def test_each_feature_is_the_crafted_scene_s_geometry():
 MAPS, H, W = 2, 3, 4  # map 0: pick, map 1: push
 
 
-class Scores:
-    """A greedy pixel policy over fixed scores that honours masks (as a PixelDoubleDQN does)."""
-
-    observation_space = spaces.Box(0, 255, (4, H, W), np.uint8)
-    action_space = spaces.Discrete(MAPS * H * W)
-
-    def __init__(self, scores):
-        self.scores = np.asarray(scores, float).reshape(-1)
-
-    def predict(self, obs, state=None, episode_start=None, deterministic=True, action_masks=None):
-        masks = np.ones(self.scores.size, bool) if action_masks is None else np.asarray(action_masks, bool)
-        return np.array(int(np.where(masks, self.scores, -np.inf).argmax())), state
+def scored(scores):
+    """A greedy pixel policy over ``scores`` on this file's observations."""
+    return ScoresPolicy(scores, (4, H, W))
 
 
 class FixedRisk:
@@ -128,29 +119,29 @@ def test_the_filter_masks_exactly_the_risky_picks():
     obs = np.zeros((4, H, W), np.uint8)
     risk = np.zeros((H, W))
     risk[0, 0] = 0.9  # the best pick is risky
-    filt = ff.FallFilter(Scores(scores), FixedRisk(risk), ("pick", "push"), H, W)
+    filt = ff.FallFilter(scored(scores), FixedRisk(risk), ("pick", "push"), H, W)
     masks = np.ones(MAPS * H * W, bool)
     assert int(filt.predict(obs, action_masks=masks)[0]) == 1  # the next-best pick
     assert filt.stats == {"masked": 1, "unfiltered": 0}
     masks[1] = False  # the caller's masks still hold
     assert int(filt.predict(obs, action_masks=masks)[0]) == 2
-    everything = ff.FallFilter(Scores(scores), FixedRisk(np.ones((H, W))), ("pick", "push"), H, W)
+    everything = ff.FallFilter(scored(scores), FixedRisk(np.ones((H, W))), ("pick", "push"), H, W)
     assert int(everything.predict(obs, action_masks=np.ones(MAPS * H * W, bool))[0]) == H * W  # a push
     only_picks = np.zeros(MAPS * H * W, bool)
     only_picks[:H * W] = True
     assert int(everything.predict(obs, action_masks=only_picks)[0]) == 0  # nothing safe: unfiltered
     assert everything.stats == {"masked": 2, "unfiltered": 1}
     assert int(everything.predict(obs)[0]) == 0  # a policy without env masks, every pick risky: unfiltered
-    safe = ff.FallFilter(Scores(scores), FixedRisk(np.zeros((H, W))), ("pick", "push"), H, W)
+    safe = ff.FallFilter(scored(scores), FixedRisk(np.zeros((H, W))), ("pick", "push"), H, W)
     assert int(safe.predict(obs, action_masks=np.ones(MAPS * H * W, bool))[0]) == 0
     with pytest.raises(ValueError, match="pick map"):
-        ff.FallFilter(Scores(scores), FixedRisk(risk), ("push", "pull"), H, W)
+        ff.FallFilter(scored(scores), FixedRisk(risk), ("push", "pull"), H, W)
     with pytest.raises(ValueError, match="shape"):
         filt.predict(np.zeros((1, 4, H, W), np.uint8))
     other = FixedRisk(risk)
     other.info = {"obs_shape": [4, 2 * H, 2 * W]}
     with pytest.raises(ValueError, match=r"trained on observations of shape \(4, 6, 8\)"):
-        ff.FallFilter(Scores(scores), other, ("pick", "push"), H, W)
+        ff.FallFilter(scored(scores), other, ("pick", "push"), H, W)
 
 
 def test_a_geometry_risk_scores_each_object_cell_with_its_model_and_survives_a_save(tmp_path):

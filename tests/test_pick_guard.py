@@ -4,7 +4,7 @@ start, stands aside when nothing allowed is left, and composes with the geometry
 
 import numpy as np
 import pytest
-from gymnasium import spaces
+from pixel_envs import ScoresPolicy
 
 from sb3_pixeldqn.loop_breaker import LoopBreaker
 from shelf_env import params, policies
@@ -34,18 +34,9 @@ def flat(m, row, col):
     return m * H * W + row * W + col
 
 
-class Scores:
-    """A greedy pixel policy over fixed scores that honours masks (as a PixelDoubleDQN does)."""
-
-    observation_space = spaces.Box(0, 255, (4, H, W), np.uint8)
-    action_space = spaces.Discrete(MAPS * H * W)
-
-    def __init__(self, scores):
-        self.scores = np.asarray(scores, float).reshape(-1)
-
-    def predict(self, obs, state=None, episode_start=None, deterministic=True, action_masks=None):
-        masks = np.ones(self.scores.size, bool) if action_masks is None else np.asarray(action_masks, bool)
-        return np.array(int(np.where(masks, self.scores, -np.inf).argmax())), state
+def scored(scores):
+    """A greedy pixel policy over ``scores`` on this file's observations."""
+    return ScoresPolicy(scores, (4, H, W))
 
 
 def scores():
@@ -58,7 +49,7 @@ def scores():
 
 
 def test_the_guard_masks_sorted_objects_then_objects_picked_too_often_and_forgets_at_a_new_episode():
-    obs, guard = crafted(), PickGuard(Scores(scores()), ("pick", "push_left", "push_right"), H, W, max_picks=3)
+    obs, guard = crafted(), PickGuard(scored(scores()), ("pick", "push_left", "push_right"), H, W, max_picks=3)
     start, go_on = np.array([True]), np.array([False])
     assert int(guard.predict(obs, episode_start=start)[0]) == flat(0, 7, 42)  # A looks sorted: B's pick
     assert guard.stats == {"guarded": 1, "unguarded": 0}
@@ -79,7 +70,7 @@ def test_the_guard_masks_sorted_objects_then_objects_picked_too_often_and_forget
 def test_under_the_loop_breaker_both_answers_of_a_redirected_step_count():
     """The breaker asks again where its ban hits the guard's answer; the guard counts every pick it returned."""
     obs = crafted()
-    guard = PickGuard(Scores(scores()), ("pick", "push_left", "push_right"), H, W, max_picks=3)
+    guard = PickGuard(scored(scores()), ("pick", "push_left", "push_right"), H, W, max_picks=3)
     breaker = LoopBreaker(guard, max_visits=1, radius=0)  # bans a cell after one action on it
     first = int(breaker.predict(obs, episode_start=np.array([True]), deterministic=True)[0])
     assert first == flat(0, 7, 42) and guard._picks == [(7, 42)]
@@ -91,10 +82,10 @@ def test_under_the_loop_breaker_both_answers_of_a_redirected_step_count():
 
 def test_bad_input_and_the_registry():
     with pytest.raises(ValueError, match="pick map"):
-        PickGuard(Scores(scores()), ("push_left", "push_right", "pull"), H, W)
+        PickGuard(scored(scores()), ("push_left", "push_right", "pull"), H, W)
     with pytest.raises(ValueError, match="max_picks"):
-        PickGuard(Scores(scores()), ("pick", "push_left", "push_right"), H, W, max_picks=0)
+        PickGuard(scored(scores()), ("pick", "push_left", "push_right"), H, W, max_picks=0)
     with pytest.raises(ValueError, match="shape"):
-        PickGuard(Scores(scores()), ("pick", "push_left", "push_right"), H, W).predict(np.zeros((1, 4, H, W)))
+        PickGuard(scored(scores()), ("pick", "push_left", "push_right"), H, W).predict(np.zeros((1, 4, H, W)))
     assert policies.policy_wrappers("m.zip+geometry-filter+pick-guard+loop-breaker") == (
         "m.zip", ("+geometry-filter", PICK_GUARD, "+loop-breaker"))
