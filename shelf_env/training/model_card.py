@@ -110,6 +110,11 @@ WRAPPER_NAME = {GEOMETRY_FILTER: "the geometry pick filter", PICK_GUARD: "the pi
 WRAPPER_HOME = {PICK_GUARD: "`shelf_env.pick_guard`", LOOP_BREAKER: "`sb3_pixeldqn.LoopBreaker`"}
 
 
+def spoken_list(items: list[str]) -> str:
+    """``items`` as a sentence lists them: ``a``, ``a and b``, ``a, b and c``."""
+    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
+
+
 def filter_wrappers(label: str) -> tuple[str, ...]:
     """The wrappers of a filtered policy's ``label`` in evaluations, innermost first: ``+geometry-filter``, then any of
     `WRAPPER_TEXT`'s; a `ValueError` naming the label otherwise."""
@@ -134,10 +139,8 @@ def filter_section(info: dict[str, Any], zip_path: pathlib.Path, results: pathli
     threshold = GeometryRisk.load(risk).threshold
     wrappers = filter_wrappers(str(info["label"]))
     name = filtered_name(zip_path, str(info["label"]))
-    names = [WRAPPER_NAME[w] for w in wrappers]
-    under = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
     after = "".join(f", then {WRAPPER_TEXT[w]}" for w in wrappers[1:])
-    out = ["", f"## The policy to use: under {under}", "",
+    out = ["", f"## The policy to use: under {spoken_list([WRAPPER_NAME[w] for w in wrappers])}", "",
            "```python",
            "from shelf_env.policies import make_policy",
            f'policy = make_policy("{name}", env)   # env as above',

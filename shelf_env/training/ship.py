@@ -57,6 +57,7 @@ from shelf_env.training.model_card import (
     filtered_name,
     model_card,
     model_cards,
+    spoken_list,
 )
 
 #: The runs that ship, by the name of their preset and run (the preset gives the layout's primitives), and
@@ -76,18 +77,17 @@ HEAD = ("`p_s.zip` {what}: distilled from the teacher dataset into the Q-maps of
 FILTER_RISK = geometry_risk_path(DISTILLED).name
 FILTER_INFO = pathlib.Path(FILTER_RISK).with_suffix(".json").name
 FILTER_COMMAND = "bash results/fall_geometry/run.sh"
+#: What the head adds when earlier distilled P+S are on the shelf (``v<k>/``, k >= 2).
+ARCHIVE_HEAD = (" The distilled P+S that `p_s.zip` replaced stay here, each in `v<k>/` with its report and card ({}); "
+                "results name each distilled model by its distillation's name.")
 
 
 def filtered_head(label: str) -> str:
     """The head when the shelf's p_s.zip ships with its filter, played as ``label`` says: the policy to use is that."""
-    wrappers = filter_wrappers(label)
     parts = [f"a camera-only pick filter (`{FILTER_RISK}`, `shelf_env.fall_filter`)"]
-    parts += [f"{WRAPPER_NAME[w]} ({WRAPPER_HOME[w]})" for w in wrappers[1:]]
+    parts += [f"{WRAPPER_NAME[w]} ({WRAPPER_HOME[w]})" for w in filter_wrappers(label)[1:]]
     return (f"`{filtered_name(DISTILLED, label)}` is the P+S to use: the Q-maps of `p_s.zip` played under "
-            + (parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]) + ". ")
-#: What the head adds when earlier distilled P+S are on the shelf (``v<k>/``, k >= 2).
-ARCHIVE_HEAD = (" The distilled P+S that `p_s.zip` replaced stay here, each in `v<k>/` with its report and card ({}); "
-                "results name each distilled model by its distillation's name.")
+            f"{spoken_list(parts)}. ")
 
 
 def archived(out: pathlib.Path) -> list[int]:
