@@ -19,7 +19,7 @@ cells of
 Pushes are left alone (a push of a sorted object can make room). Where that would leave no allowed action
 the policy chooses as if unguarded. It reads nothing but the observation and the picks it returned, so a
 robot can run it; it is not learned. Its memory is per episode, cleared where ``episode_start`` is True
-(the evaluation passes it at every reset; `sb3_pixeldqn.LoopBreaker` passes it on). Every pick it returns
+(the evaluation passes it at every reset; `sb3_pixeldqn.LoopBreaker` passes it on) or by `reset`. Every pick it returns
 counts as one: under the loop breaker, a first answer the breaker asks again about (its cell is banned, so
 that object was picked there before) counts as well as the answer that is executed. Its counters:
 ``guarded`` (decisions where at least one allowed pick cell was masked out) and ``unguarded`` (decisions
@@ -59,6 +59,10 @@ class PickGuard:
             raise ValueError(f"action space {self.action_space} is not {self.n_maps} maps of {rows}x{cols}")
         self.acts_masked = bool(getattr(policy, "acts_masked", True))
         self.stats = {"guarded": 0, "unguarded": 0}
+
+    def reset(self) -> None:
+        """Forget the episode's picks (as ``episode_start`` True does)."""
+        self._picks = []
 
     def guarded_cells(self, obs: np.ndarray) -> np.ndarray:
         """Bool ``(H, W)``: the cells of the objects that look sorted in ``obs`` or hold ``max_picks`` earlier picks."""

@@ -58,6 +58,10 @@ def test_the_guard_masks_sorted_objects_then_objects_picked_too_often_and_forget
     assert int(guard.predict(obs, episode_start=go_on)[0]) == flat(1, 20, 30)  # three: B is guarded too, a push
     assert int(guard.predict(obs, episode_start=go_on)[0]) == flat(1, 20, 30)  # a push is not counted
     assert int(guard.predict(obs, episode_start=start)[0]) == flat(0, 7, 42)  # a new episode forgets B's picks
+    for _ in range(3):
+        guard.predict(obs)
+    guard.reset()  # so does reset, for a caller that passes no episode_start
+    assert int(guard.predict(obs)[0]) == flat(0, 7, 42)
     only_a = np.zeros(MAPS * H * W, bool)
     only_a[flat(0, 33, 7)] = True
     assert int(guard.predict(obs, episode_start=start, action_masks=only_a)[0]) == flat(0, 33, 7)  # stands aside
