@@ -2,7 +2,8 @@
 # The pick guard (docs/experiments/pick-guard.md): the shipped P+S with and without research.pick_guard's
 # +pick-guard on validation scenes, then on issue 10's held-out scenes: the whole open-loop grid, then closed
 # loop + safe picks on seed 0. The shipped policy's cells are copied (by label and digest) from where they were
-# played. Usage: bash results/pick_guard/run.sh [val|open|closed|all]   (WORKERS=2 for two processes)
+# played; then the guarded policy's greedy fall rate at N = 8 (each decision probed in a forked copy).
+# Usage: bash results/pick_guard/run.sh [val|open|closed|falls|all]   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 out=results/pick_guard
@@ -42,4 +43,8 @@ if [[ $step == closed || $step == all ]]; then
   python -m shelf_env.evaluation.report "$out/closed_safe" --learned $new --heuristics h-d h-a
   python -m shelf_env.evaluation.compare "$out/closed_safe" --pair $new $old --pair $new $ref --pair $new h-d \
       --pair $new h-a --out "$out/closed_safe/paired.md"
+fi
+if [[ $step == falls || $step == all ]]; then
+  # 4. the guarded policy's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
+  python -m shelf_env.evaluation.falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
 fi
