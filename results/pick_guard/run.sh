@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The pick guard (docs/experiments/pick-guard.md): the shipped P+S with and without research.pick_guard's
-# +pick-guard on validation scenes, then on issue 10's held-out scenes: the whole open-loop grid, then closed
+# The pick guard (docs/experiments/pick-guard.md): the P+S shipped before it with and without +pick-guard
+# (research.pick_guard when the cells were played, shelf_env.pick_guard since) on validation scenes, then on issue 10's held-out scenes: the whole open-loop grid, then closed
 # loop + safe picks on seed 0. The shipped policy's cells are copied (by label and digest) from where they were
 # played; then the guarded policy's greedy fall rate at N = 8 (each decision probed in a forked copy).
 # Usage: bash results/pick_guard/run.sh [val|open|closed|falls|all]   (WORKERS=2 for two processes)
