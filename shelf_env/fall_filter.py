@@ -300,51 +300,81 @@ class GeometryRisk:
             raise ValueError(f"{path} is not a readable geometry risk model: {err}") from err
 
 
-class FallFilter:
+class PickMask:
+    """A test-time wrapper around ``policy`` (SB3's ``predict`` with ``action_masks``) that masks out some cells of
+    its pick map before the policy chooses: `FallFilter` (the risky picks) and `shelf_env.pick_guard.PickGuard` (the
+    wasted ones). It holds their layout checks and `choose`, which masks and stands aside where nothing allowed would
+    be left. ``STATS`` names its two counters: decisions where it masked out at least one allowed pick cell, and
+    decisions where nothing allowed was left, so that the policy chose as if unwrapped."""
+
+    STATS = ("masked", "unmasked")
+
+    def __init__(self, policy: Any, map_names: tuple[str, ...], rows: int, cols: int) -> None:
+        name = type(self).__name__
+        self.policy = policy
+        self.observation_space, self.action_space = policy.observation_space, policy.action_space
+        if "pick" not in map_names:
+            raise ValueError(f"{name} needs a pick map; the policy's maps are {map_names}")
+        self.pick, self.n_maps, self.rows, self.cols = map_names.index("pick"), len(map_names), rows, cols
+        if int(self.action_space.n) != self.n_maps * rows * cols:
+            raise ValueError(f"action space {self.action_space} is not {self.n_maps} maps of {rows}x{cols}")
+        self.acts_masked = bool(getattr(policy, "acts_masked", True))
+        self.stats = dict.fromkeys(self.STATS, 0)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        """``observation`` as an array, checked to be one observation of the policy's shape."""
+        obs = np.asarray(observation)
+        if obs.shape != self.observation_space.shape:
+            raise ValueError(f"{type(self).__name__} acts on one observation of shape {self.observation_space.shape}, "
+                             f"got {obs.shape}")
+        return obs
+
+    def allowed(self, action_masks: np.ndarray | None) -> np.ndarray:
+        """The caller's masks, flat (everything where it passed none)."""
+        return (np.ones(int(self.action_space.n), bool) if action_masks is None
+                else np.asarray(action_masks, bool).reshape(-1))
+
+    def choose(self, obs: np.ndarray, allowed: np.ndarray, cells: np.ndarray, state: Any,
+               deterministic: bool) -> tuple[np.ndarray, Any]:
+        """The policy's action with the pick cells ``cells`` (bool ``(H, W)``) masked out of ``allowed``, or within
+        ``allowed`` alone where that would leave nothing; counted in ``stats``."""
+        masked, unmasked = self.STATS
+        self.stats[masked] += int((allowed.reshape(self.n_maps, self.rows, self.cols)[self.pick] & cells).any())
+        kept = allowed.copy()
+        kept.reshape(self.n_maps, self.rows, self.cols)[self.pick] &= ~cells
+        if not kept.any():
+            self.stats[unmasked] += 1
+            kept = allowed
+        return self.policy.predict(obs, state=state, deterministic=deterministic, action_masks=kept)
+
+
+class FallFilter(PickMask):
     """Wrap ``policy`` (SB3's ``predict`` with ``action_masks``): pick cells whose predicted fall risk
     is at or over ``risk.threshold`` are masked out before the policy chooses (see the module
     docstring). Where that leaves no allowed action, the policy chooses as if unfiltered. Counts in
     ``stats``: ``masked`` (decisions where at least one allowed pick cell was masked out) and
     ``unfiltered`` (decisions where nothing allowed was left, so the filter stood aside)."""
 
+    STATS = ("masked", "unfiltered")
+
     def __init__(self, policy: Any, risk: PickRisk, map_names: tuple[str, ...], rows: int, cols: int) -> None:
-        self.policy, self.risk = policy, risk
-        self.observation_space, self.action_space = policy.observation_space, policy.action_space
-        if "pick" not in map_names:
-            raise ValueError(f"FallFilter needs a pick map; the policy's maps are {map_names}")
-        self.pick, self.n_maps, self.rows, self.cols = map_names.index("pick"), len(map_names), rows, cols
-        if int(self.action_space.n) != self.n_maps * rows * cols:
-            raise ValueError(f"action space {self.action_space} is not {self.n_maps} maps of {rows}x{cols}")
+        super().__init__(policy, map_names, rows, cols)
+        self.risk = risk
         trained_on = getattr(risk, "info", {}).get("obs_shape")
         if trained_on is not None and tuple(trained_on) != tuple(self.observation_space.shape):
             raise ValueError(f"the fall-risk model was trained on observations of shape {tuple(trained_on)}; the "
                              f"policy's are {tuple(self.observation_space.shape)} (another cell size or layout)")
-        self.acts_masked = bool(getattr(policy, "acts_masked", True))
-        self.stats = {"masked": 0, "unfiltered": 0}
 
     def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
                 deterministic: bool = True, action_masks: np.ndarray | None = None) -> tuple[np.ndarray, Any]:
-        obs = np.asarray(observation)
-        if obs.shape != self.observation_space.shape:
-            raise ValueError(f"FallFilter acts on one observation of shape {self.observation_space.shape}, "
-                             f"got {obs.shape}")
-        allowed = (np.ones(int(self.action_space.n), bool) if action_masks is None
-                   else np.asarray(action_masks, bool).reshape(-1).copy())
-        maps = allowed.reshape(self.n_maps, self.rows, self.cols)
+        obs, allowed = self.observation(observation), self.allowed(action_masks)
         risky = self.risk.risk(obs) >= self.risk.threshold
-        if action_masks is None and not (maps[self.pick] & ~risky).any():
+        if action_masks is None and not (allowed.reshape(self.n_maps, self.rows, self.cols)[self.pick] & ~risky).any():
             # a policy that gets no env masks (a heuristic) picks among object cells by itself: with
             # every cell risky there is nothing to restrict it to
             self.stats["unfiltered"] += 1
             return self.policy.predict(obs, state=state, deterministic=deterministic)
-        filtered = allowed.copy()
-        filtered.reshape(self.n_maps, self.rows, self.cols)[self.pick] &= ~risky
-        self.stats["masked"] += int((maps[self.pick] & risky).any())
-        if not filtered.any():
-            self.stats["unfiltered"] += 1
-            filtered = allowed
-        action, state = self.policy.predict(obs, state=state, deterministic=deterministic, action_masks=filtered)
-        return action, state
+        return self.choose(obs, allowed, risky, state, deterministic)
 
 
 #: Appended to a checkpoint's path: play it under `FallFilter` with `geometry_risk_path`'s model.

@@ -36,29 +36,24 @@ from typing import Any
 import numpy as np
 
 from shelf_env.baselines.heuristics import ObservationView
+from shelf_env.fall_filter import PickMask
 
 #: The suffix: ``<checkpoint>+geometry-filter+pick-guard+loop-breaker`` guards the filtered policy's picks.
 PICK_GUARD = "+pick-guard"
 
 
-class PickGuard:
+class PickGuard(PickMask):
     """Wrap ``policy``: pick cells of objects that look sorted, or that hold ``max_picks`` of the episode's
     earlier picks, are masked out before it chooses (module docstring)."""
 
+    STATS = ("guarded", "unguarded")
+
     def __init__(self, policy: Any, map_names: tuple[str, ...], rows: int, cols: int, max_picks: int = 3) -> None:
-        if "pick" not in map_names:
-            raise ValueError(f"PickGuard needs a pick map; the policy's maps are {map_names}")
+        super().__init__(policy, map_names, rows, cols)
         if isinstance(max_picks, bool) or not isinstance(max_picks, int) or max_picks < 1:
             raise ValueError(f"max_picks must be an integer >= 1, got {max_picks!r}")
         self.max_picks = max_picks
         self._picks: list[tuple[int, int]] = []
-        self.policy = policy
-        self.observation_space, self.action_space = policy.observation_space, policy.action_space
-        self.pick, self.n_maps, self.rows, self.cols = map_names.index("pick"), len(map_names), rows, cols
-        if int(self.action_space.n) != self.n_maps * rows * cols:
-            raise ValueError(f"action space {self.action_space} is not {self.n_maps} maps of {rows}x{cols}")
-        self.acts_masked = bool(getattr(policy, "acts_masked", True))
-        self.stats = {"guarded": 0, "unguarded": 0}
 
     def reset(self) -> None:
         """Forget the episode's picks (as ``episode_start`` True does)."""
@@ -78,23 +73,10 @@ class PickGuard:
 
     def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
                 deterministic: bool = True, action_masks: np.ndarray | None = None) -> tuple[np.ndarray, Any]:
-        obs = np.asarray(observation)
-        if obs.shape != self.observation_space.shape:
-            raise ValueError(f"PickGuard acts on one observation of shape {self.observation_space.shape}, "
-                             f"got {obs.shape}")
-        allowed = (np.ones(int(self.action_space.n), bool) if action_masks is None
-                   else np.asarray(action_masks, bool).reshape(-1))
+        obs, allowed = self.observation(observation), self.allowed(action_masks)
         if episode_start is not None and bool(np.asarray(episode_start).reshape(-1)[0]):
             self._picks = []
-        looks_sorted = self.guarded_cells(obs)
-        guarded = allowed.copy()
-        guarded.reshape(self.n_maps, self.rows, self.cols)[self.pick] &= ~looks_sorted
-        self.stats["guarded"] += int((allowed.reshape(self.n_maps, self.rows, self.cols)[self.pick]
-                                      & looks_sorted).any())
-        if not guarded.any():
-            self.stats["unguarded"] += 1
-            guarded = allowed
-        action, state = self.policy.predict(obs, state=state, deterministic=deterministic, action_masks=guarded)
+        action, state = self.choose(obs, allowed, self.guarded_cells(obs), state, deterministic)
         m, rest = divmod(int(np.asarray(action).reshape(-1)[0]), self.rows * self.cols)
         if m == self.pick:
             self._picks.append(divmod(rest, self.cols))
