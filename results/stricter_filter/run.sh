@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# A stricter fall filter under the pick guard (docs/experiments/stricter-filter.md): where the shipped policy's
+# greedy falls come from (validation), then the shipped p_s.zip with the same risk model at threshold 0.05 instead
+# of 0.1, under the pick guard and the loop breaker: validation, then issue 10's held-out open-loop grid, then closed
+# loop + safe picks (seed 0). The shipped policy's cells are copied (by label and digest) from results/pick_guard.
+# Usage: bash results/stricter_filter/run.sh [export|sources|val|open|closed|all]   (WORKERS=2 for two processes)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+out=results/stricter_filter
+fit=results/fall_geometry  # round two's fit (fall-geometry.md), the one the shipped risk was exported from
+shipped=results/fall_geometry/filter/p_s_geo10.zip+geometry-filter+pick-guard+loop-breaker
+candidate="$out/p_s_geo05.zip+geometry-filter+pick-guard+loop-breaker"
+new=p_s_geo05+geometry-filter+pick-guard+loop-breaker  # the candidate's cells' label
+old=p_s_geo10+geometry-filter+pick-guard+loop-breaker  # the shipped policy's
+step=${1:-all}
+if [[ $step == export || $step == all ]]; then
+  cp -p examples/pretrained/p_s.zip "$out/p_s_geo05.zip"
+  [ -f "$out/p_s_geo05.geometry_risk.pt" ] || python -m research.fall_geometry export \
+      --models "$fit/fit_blockers.models.pt" --name mlp --features "$fit/features_blockers.npz" --threshold 0.05 \
+      --out "$out/p_s_geo05.geometry_risk.pt"
+fi
+if [[ $step == sources || $step == all ]]; then
+  # 1. the shipped policy's greedy decisions on validation scenes (seed 2000, N = 8), each probed, by primitive and risk
+  python -m research.fall_sources "$shipped" --ns 8 --runs 30 --seed 2000 --out "$out/sources_val.json"
+fi
+if [[ $step == val || $step == all ]]; then
+  # 3. validation: seeds 2000-2002, N = 5, 8, 11
+  python -m research.evaluate --policies "$shipped" "$candidate" --ns 5,8,11 --seeds 3 --runs 30 \
+      --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" \
+      --reuse-cells results/pick_guard/val90
+  python -m shelf_env.evaluation.compare "$out/val90" --pair $new $old --out "$out/val90_pairs.md"
+fi
+if [[ $step == open || $step == all ]]; then
+  # 4a. held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
+  grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out "$out/open")
+  others=("p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4=examples/pretrained/p_s.zip" examples/pretrained/s.zip h-d h-a)
+  python -m research.evaluate --policies "$candidate" "${grid[@]}" --workers "${WORKERS:-1}"
+  python -m research.evaluate --policies "$shipped" "${others[@]}" "${grid[@]}" --reuse-cells results/pick_guard/open
+  python -m research.evaluate --policies "$candidate" "$shipped" "${others[@]}" "${grid[@]}" --summarize-only
+  python -m shelf_env.evaluation.report "$out/open" --learned $new --pick-only s --heuristics h-d h-a
+  python -m shelf_env.evaluation.compare "$out/open" --pair $new $old --pair $new h-d --pair $new h-a \
+      --out "$out/open/paired.md"
+fi
+if [[ $step == closed || $step == all ]]; then
+  # 4b. held-out, closed loop + safe picks: seed 0, N = 3..14
+  grid=(--ns 3-14 --runs 30 --seeds 1 --object-sets ycb --closed-loop '{}' --safe-picks --out "$out/closed_safe")
+  python -m research.evaluate --policies "$candidate" "${grid[@]}" --workers "${WORKERS:-1}"
+  python -m research.evaluate --policies "$shipped" h-d h-a "${grid[@]}" --reuse-cells results/pick_guard/closed_safe
+  python -m research.evaluate --policies "$candidate" "$shipped" h-d h-a "${grid[@]}" --summarize-only
+  python -m shelf_env.evaluation.report "$out/closed_safe" --learned $new --heuristics h-d h-a
+  python -m shelf_env.evaluation.compare "$out/closed_safe" --pair $new $old --pair $new h-d --pair $new h-a \
+      --out "$out/closed_safe/paired.md"
+fi
