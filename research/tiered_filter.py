@@ -20,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 from shelf_env.baselines.heuristics import object_blobs
-from shelf_env.fall_filter import FallFilter, GeometryRisk, geometry_risk_path
+from shelf_env.fall_filter import FallFilter, GeometryRisk, PickRisk, geometry_risk_path
 from shelf_env.policies import WRAPPERS, register_wrapper
 
 #: Picks at or over this risk are masked while an allowed pick on an object stays below it (fixed, not searched).
@@ -35,7 +35,7 @@ class TieredFilter(FallFilter):
 
     STATS = ("masked", "unfiltered")
 
-    def __init__(self, policy: Any, risk: GeometryRisk, map_names: tuple[str, ...], rows: int, cols: int,
+    def __init__(self, policy: Any, risk: PickRisk, map_names: tuple[str, ...], rows: int, cols: int,
                  prefer: float = PREFER) -> None:
         super().__init__(policy, risk, map_names, rows, cols)
         if not 0 < prefer <= risk.threshold:
