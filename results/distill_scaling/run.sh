@@ -188,3 +188,8 @@ P=()
 for v in "${V90[@]}"; do P+=("$M/$v.zip"); done
 "$PY" -m shelf_env.cli.evaluate --policies "${P[@]}" "$M/$E.ensemble.json" --ns 5,8,11 \
   --runs 30 --seeds 3 --first-seed 2000 --object-sets ycb --out "$DIR/val90" --summarize-only
+# The nineteenth session: the eleventh point, all 649 shards at its start (55 + 50 + 205 + 184 of series 3 + 155 of
+# series 4), averaged and plain from one run (the curve reads the plain one: results/distill_test/run.sh)
+SHARDS=s00:55,s01:50,s02:205,s03:184,s04:155 distil p_s_dagger594_aug_mpa_r2_ce1_avg4 all --anchor 1.0 \
+  --teacher-radius 2 --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger594_aug_mpa_r2_ce1.zip"
+cp "$M/p_s_dagger594_aug_mpa_r2_ce1.distill.json" "$DIR/"
