@@ -57,6 +57,41 @@ def test_with_explore_1_the_driving_model_is_followed_wherever_it_stays_valid(tm
             assert a["executed_action"][t] != a["label_action"][greedy][0]
 
 
+def test_a_policy_under_its_wrappers_drives_as_it_plays(tmp_path: pathlib.Path) -> None:
+    """The shipped P+S under its filter, guard and breaker as the driver: the shard names it and the digest of every
+    file it reads, and each state's greedy label is what that policy chooses there when asked as an evaluation asks
+    (the stored observation's masks; ``episode_start`` at each episode's first state; its memory carried through the
+    episode and forgotten at the next)."""
+    import gymnasium as gym
+
+    from shelf_env.camera.heightmap import observation_masks
+    from shelf_env.evaluation.protocol import policy_digest
+    from shelf_env.policies import make_policy
+
+    shipped = "examples/pretrained/p_s.zip+geometry-filter+pick-guard+loop-breaker"
+    assert dataset.collect(tmp_path, hours=1.0, ns=(3,), model_path=shipped, episodes_per_shard=2, max_shards=1,
+                           max_probes=4, explore=1.0) == 1
+    shard = dataset.load_shard(dataset.shard_path(tmp_path, 0, 0))
+    a = shard.arrays
+    assert len(set(a["state_episode"].tolist())) == 2
+    assert shard.meta["model"] == shipped
+    assert shard.meta["model_sha256"] == policy_digest(shipped) != policy_digest("examples/pretrained/p_s.zip")
+    env = gym.make("ShelfSort-v0", num_objects=3, object_set="train", primitives=dataset.PRIMITIVES,
+                   pixel_size=dataset.PIXEL_SIZE)
+    try:
+        policy = make_policy(shipped, env)
+        names = env.unwrapped.map_names  # type: ignore[attr-defined]
+        for t in range(shard.num_states):
+            masks = observation_masks(a["obs"][t], dataset.PIXEL_SIZE, names).reshape(-1)
+            first = t == 0 or a["state_episode"][t] != a["state_episode"][t - 1]
+            action, _ = policy.predict(a["obs"][t], deterministic=True, action_masks=masks,
+                                       episode_start=np.array([first]))
+            greedy = (a["label_state"] == t) & (a["label_source"] == dataset.SOURCES.index("greedy"))
+            assert int(np.asarray(action).reshape(-1)[0]) == int(a["label_action"][greedy][0])
+    finally:
+        env.close()
+
+
 def test_every_label_equals_a_real_step(one_shard: pathlib.Path) -> None:
     shard = dataset.load_shard(dataset.shard_path(one_shard, 0, 0))
     states, labels, mismatches = dataset.replay_states(shard)

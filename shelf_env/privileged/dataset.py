@@ -60,14 +60,15 @@ import gymnasium as gym
 import numpy as np
 
 from sb3_pixeldqn.distill import LabelledStates
+from sb3_pixeldqn.loop_breaker import predict_takes
 from shelf_env import params
 from shelf_env.actions import PRIMITIVES
 from shelf_env.baselines.heuristics import ObservationView
 from shelf_env.camera.heightmap import observation_masks
 from shelf_env.env import DYNAMICS_VERSION
-from shelf_env.evaluation.protocol import policy_digest
+from shelf_env.evaluation.protocol import greedy_action, policy_digest, takes_action_masks
 from shelf_env.files import write_atomically
-from shelf_env.policies import POLICIES, masked_greedy
+from shelf_env.policies import POLICIES, make_policy, policy_file
 from shelf_env.privileged.lookahead import LookaheadHeuristic, Outcome, probe_outcome
 from shelf_env.processes import exit_with_parent
 
@@ -139,19 +140,24 @@ def collect_episode(env: gym.Env, model: Any, seed: int, rng: np.random.Generato
                     max_probes: int = 24, teacher_name: str = "h-d-lookahead") -> Episode:
     """Play the scene of ``seed`` with the teacher and label every visited state (module docstring).
     ``model``: anything with SB3's ``predict(obs, deterministic, action_masks)``, whose greedy action is
-    labelled first and sometimes executed; None for the teacher alone."""
+    labelled first and sometimes executed; None for the teacher alone. It is asked as an evaluation asks
+    (`shelf_env.evaluation.protocol.greedy_action`: the env's masks, and SB3's ``episode_start`` at the first
+    state where its ``predict`` takes it), so a policy under wrappers with memory (the loop breaker, the pick
+    guard) drives as it plays."""
     base: Any = env.unwrapped
     if teacher_name not in TEACHERS:
         raise ValueError(f"unknown teacher {teacher_name!r}; known: {list(TEACHERS)}")
     teacher: LookaheadHeuristic = POLICIES[teacher_name](env, 0)
     episode = Episode()
+    masked = model is not None and takes_action_masks(model)
+    starts = model is not None and predict_takes(model, "episode_start")
     obs, info = env.reset(seed=seed)
     sorted_now = int(info["num_sorted"])
     for step in range(base.max_actions):
         view = ObservationView.from_observation(obs, teacher.margin_cells)
         if not view.graspable.any():
             break
-        greedy = None if model is None else masked_greedy(model, env, obs)
+        greedy = None if model is None else greedy_action(env, model, obs, step == 0, masked, starts)
         choice = int(teacher.predict(obs, deterministic=True)[0])
         outcomes: dict[int, tuple[Outcome, int]] = {a: (o, SOURCES.index("teacher")) for a, o in teacher._probed}
         for action, source in probe_actions(env, teacher, view, greedy, rng, max_probes):
@@ -451,19 +457,16 @@ def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence
         raise ValueError(f"unknown teacher {teacher!r}; known: {list(TEACHERS)}")
     if episodes_per_shard < 1 or max_probes < 1 or not 0 <= explore <= 1:
         raise ValueError("episodes_per_shard and max_probes must be >= 1 and explore in [0, 1]")
-    model, model_sha256 = None, None
-    if model_path is not None:
-        from sb3_pixeldqn import PixelDoubleDQN
-
-        if not pathlib.Path(model_path).is_file():
-            raise ValueError(f"driving model {model_path!r} does not exist")
-        model = PixelDoubleDQN.load(model_path, device="cpu")
-        model_sha256 = policy_digest(model_path)
+    if model_path is not None and not pathlib.Path(policy_file(model_path)).is_file():
+        raise ValueError(f"driving model {policy_file(model_path)!r} does not exist")
     env = gym.make("ShelfSort-v0", num_objects=max(ns), object_set=object_set, primitives=PRIMITIVES,
                    pixel_size=PIXEL_SIZE)
     start, written, shard = time.monotonic(), 0, 0
-    env_layout = layout(env)
     try:
+        env_layout = layout(env)
+        model, model_sha256 = None, None
+        if model_path is not None:  # a checkpoint, with the wrappers it names (`shelf_env.policies.make_policy`)
+            model, model_sha256 = make_policy(model_path, env), policy_digest(model_path)
         while max_shards is None or shard < max_shards:
             path = shard_path(out, series, shard)
             if path.exists():
@@ -545,7 +548,8 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--series", type=int, default=0, help="first shard series (worker k uses series + k)")
     c.add_argument("--ns", type=int, nargs="+", default=list(DEFAULT_NS), help="numbers of objects to draw from")
     c.add_argument("--model", default="examples/pretrained/v1/p_s.zip", help="driving model whose greedy action is "
-                   "labelled first ('none' for the teacher alone)")
+                   "labelled first, a checkpoint with any wrappers shelf-evaluate takes (the shipped P+S: "
+                   "examples/pretrained/p_s.zip+geometry-filter+pick-guard+loop-breaker); 'none' for the teacher alone")
     c.add_argument("--episodes-per-shard", type=int, default=2, help="whole episodes per shard file")
     c.add_argument("--max-shards", type=int, default=None, help="stop once each series holds this many shards")
     c.add_argument("--max-probes", type=int, default=24, help="most labelled actions per state")
