@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from sb3_pixeldqn.loop_breaker import predict_takes
+from shelf_env.baselines.heuristics import object_blobs
 from shelf_env.evaluation.falls import RESCUE
 from shelf_env.evaluation.protocol import (
     check_ns,
@@ -41,9 +42,13 @@ from shelf_env.privileged.lookahead import probe_outcome
 RISK_BINS = (0.02, 0.05, 0.1)
 
 
-def episode_decisions(env: Any, policy: Any, rescue: Any, risk: GeometryRisk | None, reset_seed: int) -> list[dict]:
+def episode_decisions(env: Any, policy: Any, rescue: Any, risk: GeometryRisk | None, reset_seed: int,
+                      alternatives: bool = False) -> list[dict]:
     """Every greedy decision of one episode: its map, cell, the risk there (picks, with a risk model), and whether
-    it would have ended the episode invalid / with a fall."""
+    it would have ended the episode invalid / with a fall. With ``alternatives`` (and a risk model), a pick is also
+    compared with the lowest-risk cell of the same object (as the heuristics' blobs see it): that cell's risk, and,
+    where it is another cell, whether picking it instead would have ended the episode invalid / with a fall, and how
+    many objects each would have left sorted."""
     unwrapped: Any = env.unwrapped
     maps, rows, cols = tuple(unwrapped.map_names), int(unwrapped.rows), int(unwrapped.cols)
     masked, starts = takes_action_masks(policy), predict_takes(policy, "episode_start")
@@ -55,15 +60,34 @@ def episode_decisions(env: Any, policy: Any, rescue: Any, risk: GeometryRisk | N
         row, col = divmod(cell, cols)
         outcome = probe_outcome(env, action)
         record = {"map": maps[primitive], "row": row, "col": col, "invalid": not outcome.valid,
-                  "fell": bool(outcome.fell), "risk": None}
+                  "fell": bool(outcome.fell), "sorted": outcome.num_sorted, "risk": None}
         if risk is not None and maps[primitive] == "pick":
-            record["risk"] = float(risk.risk(np.asarray(obs))[row, col])
+            risk_map = risk.risk(np.asarray(obs))
+            record["risk"] = float(risk_map[row, col])
+            if alternatives:
+                record.update(safest_cell(env, obs, risk_map, primitive * rows * cols, row, col))
         decisions.append(record)
         if not outcome.valid:
             action = int(np.asarray(rescue.predict(obs, deterministic=True)[0]).reshape(-1)[0])
         obs, _, terminated, truncated, _ = env.step(action)
         if terminated or truncated:
             return decisions
+
+
+def safest_cell(env: Any, obs: np.ndarray, risk_map: np.ndarray, offset: int, row: int, col: int) -> dict[str, Any]:
+    """The lowest-risk cell of the object under the pick at (``row``, ``col``) and, where it is another cell, the
+    probed outcome of picking it instead (``offset``: the pick map's first action)."""
+    blobs = object_blobs(np.asarray(obs))
+    if blobs[row, col] < 0:
+        return {"alt_risk": None}
+    cells = np.flatnonzero(blobs.reshape(-1) == blobs[row, col])
+    best = int(cells[np.argmin(risk_map.reshape(-1)[cells])])
+    out: dict[str, Any] = {"alt_risk": float(risk_map.reshape(-1)[best]),
+                           "alt_same": best == row * blobs.shape[1] + col}
+    if not out["alt_same"]:
+        alt = probe_outcome(env, offset + best)
+        out.update(alt_invalid=not alt.valid, alt_fell=bool(alt.fell), alt_sorted=alt.num_sorted)
+    return out
 
 
 def summary(decisions: list[dict]) -> dict[str, Any]:
@@ -81,10 +105,22 @@ def summary(decisions: list[dict]) -> dict[str, Any]:
              "decisions": sum(lo <= d["risk"] < hi for d in risked),
              "fell": sum(lo <= d["risk"] < hi and d["fell"] for d in risked)}
             for lo, hi in zip(edges[:-1], edges[1:])]
+    compared = [d for d in risked if d.get("alt_risk") is not None]
+    if compared:
+        moved = [d for d in compared if not d["alt_same"]]
+        out["safest_cell"] = {"picks": len(compared), "already_safest": len(compared) - len(moved),
+                              "moved": len(moved), "fell": sum(d["fell"] for d in moved),
+                              "alt_fell": sum(d["alt_fell"] for d in moved),
+                              "fell_alt_kept": sum(d["fell"] and not d["alt_invalid"] for d in moved),
+                              "valid_both": sum(not d["invalid"] and not d["alt_invalid"] for d in moved),
+                              "valid_both_alt_sorted_fewer": sum(
+                                  not d["invalid"] and not d["alt_invalid"]
+                                  and (d["alt_sorted"] or 0) < (d["sorted"] or 0) for d in moved)}
     return out
 
 
-def measure(policy: str, ns: list[int], seed: int, runs: int, out: pathlib.Path) -> dict[str, Any]:
+def measure(policy: str, ns: list[int], seed: int, runs: int, out: pathlib.Path,
+            alternatives: bool = False) -> dict[str, Any]:
     """Every episode of ``policy`` at each N; written to ``out`` after each N."""
     check_ns(ns)
     name, _ = policy_wrappers(policy)
@@ -96,7 +132,8 @@ def measure(policy: str, ns: list[int], seed: int, runs: int, out: pathlib.Path)
         try:
             agent = make_policy(policy, env, seed=scene_seed(seed, n, 10**6))
             rescue = POLICIES[RESCUE](env, 0)
-            episodes = [episode_decisions(env, agent, rescue, risk, scene_seed(seed, n, run)) for run in range(runs)]
+            episodes = [episode_decisions(env, agent, rescue, risk, scene_seed(seed, n, run), alternatives)
+                        for run in range(runs)]
         finally:
             env.close()
         flat = [d for e in episodes for d in e]
@@ -113,9 +150,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--runs", type=int, default=30)
     p.add_argument("--seed", type=int, default=2000, help="evaluation seed of the scenes (a validation seed)")
     p.add_argument("--out", type=pathlib.Path, required=True)
+    p.add_argument("--alternatives", action="store_true",
+                   help="also probe each pick's object at its lowest-risk cell (where that is another cell)")
     args = p.parse_args(argv)
     try:
-        measure(args.policy, args.ns, args.seed, args.runs, args.out)
+        measure(args.policy, args.ns, args.seed, args.runs, args.out, args.alternatives)
     except ValueError as err:
         print(f"fall_sources: error: {err}", file=sys.stderr)
         return 2

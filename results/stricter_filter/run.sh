@@ -4,7 +4,7 @@
 # of 0.1, under the pick guard and the loop breaker, on validation; then (added after its numbers) the tiered filter
 # (research.tiered_filter) on validation. The shipped policy's cells are copied (by label and digest) from
 # results/pick_guard/val90.
-# Usage: bash results/stricter_filter/run.sh [export|sources|val|val2|all]   (WORKERS=2 for two processes)
+# Usage: bash results/stricter_filter/run.sh [export|sources|val|val2|alternatives|all]   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 out=results/stricter_filter
@@ -39,5 +39,10 @@ if [[ $step == val2 || $step == all ]]; then
   python -m research.evaluate --policies "$shipped" "$candidate" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 \
       --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90_tiered" --reuse-cells "$out/val90"
   python -m shelf_env.evaluation.compare "$out/val90_tiered" --pair $new $old --out "$out/val90_tiered_pairs.md"
+fi
+if [[ $step == alternatives || $step == all ]]; then
+  # 5. (added after 3b) the same validation scenes as 1, each pick also compared with its object's lowest-risk cell
+  python -m research.fall_sources "$shipped" --ns 8 --runs 30 --seed 2000 --alternatives \
+      --out "$out/sources_alt_val.json"
 fi
 # The held-out steps the plan allowed for a candidate that passed validation were not run: neither passed.
