@@ -83,3 +83,18 @@ def test_fall_sources_counts_each_map_and_the_picks_by_risk_bin():
     assert out["push_left"] == {"decisions": 1, "fell": 1, "invalid": 1}
     assert [(b["decisions"], b["fell"]) for b in out["pick_risk_bins"]] == [(1, 0), (0, 0), (2, 1), (0, 0)]
     assert out["pick_risk_bins"][-1]["to"] is None
+    assert "safest_cell" not in out  # no alternatives asked for
+
+
+def test_fall_sources_compares_each_pick_with_its_object_s_safest_cell():
+    base = {"map": "pick", "risk": 0.07, "alt_risk": 0.01}
+    decisions = [{**base, "fell": True, "invalid": True, "sorted": 2, "alt_same": False, "alt_invalid": False,
+                  "alt_fell": False, "alt_sorted": 2},  # a fall the safest cell would have kept valid
+                 {**base, "fell": True, "invalid": True, "sorted": 2, "alt_same": False, "alt_invalid": True,
+                  "alt_fell": True, "alt_sorted": 2},  # it falls there too
+                 {**base, "fell": False, "invalid": False, "sorted": 3, "alt_same": False, "alt_invalid": False,
+                  "alt_fell": False, "alt_sorted": 2},  # both valid; the safest cell sorts fewer
+                 {**base, "fell": False, "invalid": False, "sorted": 3, "alt_same": True}]  # already the safest
+    assert fall_sources.summary(decisions)["safest_cell"] == {
+        "picks": 4, "already_safest": 1, "moved": 3, "fell": 2, "alt_fell": 1, "fell_alt_kept": 1, "valid_both": 1,
+        "valid_both_alt_sorted_fewer": 1}
