@@ -242,6 +242,51 @@ def test_average_last_saves_the_mean_of_the_last_epochs_weights(one_shard: pathl
     assert not (tmp_path / "x.zip").exists()
 
 
+def test_a_stopped_distillation_goes_on_from_its_last_epoch_to_the_same_weights(
+        one_shard: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A run stopped after its first of three epochs, started again, ends with the weights and history of a run that
+    never stopped (the optimiser's state and the running mean restored); its checkpoint is then gone. A checkpoint
+    of other settings, or an unreadable one, is refused by name."""
+    import torch
+
+    from sb3_pixeldqn import PixelDoubleDQN
+    from shelf_env.training import distill as distill_cli
+
+    args = ["--data", str(one_shard), "--init", MODEL, "--val-fraction", "0", "--batch-states", "2", "--epochs", "3",
+            "--average-last", "2"]
+    assert distill_cli.main([*args, "--out", str(tmp_path / "whole.zip")]) == 0
+    assert not distill_cli.resume_path(tmp_path / "whole.zip").exists()  # a finished run leaves no checkpoint
+    real, calls = distill_cli.distill, []
+
+    def stopped_in_epoch_2(*a: object, **k: object) -> object:
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # the session ends during the second epoch
+        return real(*a, **k)
+
+    monkeypatch.setattr(distill_cli, "distill", stopped_in_epoch_2)
+    out = tmp_path / "stopped.zip"
+    with pytest.raises(KeyboardInterrupt):
+        distill_cli.main([*args, "--out", str(out)])
+    checkpoint = distill_cli.resume_path(out)
+    assert checkpoint.exists() and not out.exists()
+    monkeypatch.setattr(distill_cli, "distill", real)
+    assert distill_cli.main([*args, "--seed", "1", "--out", str(out)]) == 2  # other settings: refused
+    assert f"{checkpoint} is the checkpoint of a run with other settings (seed)" in capsys.readouterr().err
+    assert distill_cli.main([*args, "--out", str(out)]) == 0
+    assert '"after_epoch": 1' in capsys.readouterr().out
+    whole = PixelDoubleDQN.load(tmp_path / "whole.zip", device="cpu").q_net.state_dict()
+    resumed = PixelDoubleDQN.load(out, device="cpu").q_net.state_dict()
+    assert all(torch.equal(whole[k], resumed[k]) for k in whole)
+    reports = [json.loads((tmp_path / f"{n}.distill.json").read_text()) for n in ("whole", "stopped")]
+    assert reports[0]["history"] == reports[1]["history"] and len(reports[1]["history"]) == 3
+    assert not checkpoint.exists()
+    checkpoint.write_bytes(b"not a checkpoint")
+    assert distill_cli.main([*args, "--out", str(out)]) == 2
+    assert f"{checkpoint} is not a readable distillation checkpoint" in capsys.readouterr().err
+
+
 def test_shards_become_exact_transitions_for_the_demonstration_store(one_shard: pathlib.Path) -> None:
     from shelf_env.training import config as cfg
 

@@ -22,6 +22,14 @@ last K epochs (the report's ``averaged`` holds their validation); ``--last-out P
 epoch's own weights there, with their report, so that one run gives both models of a comparison. The report
 records what reproduces the run (options, shards, ``seed``). The model is saved atomically (an SB3 zip that
 `PixelDoubleDQN.load` and ``shelf-train --init-from`` take); the report goes beside it as JSON.
+
+A run checkpoints after every epoch (``NAME.resume.pt`` beside the model, or ``--resume-file PATH``: the weights,
+the optimiser's state, the running mean of ``--average-last``, the history so far) and, started again with the
+same settings, goes on from the last finished epoch, to the same weights as a run that was never stopped (each
+epoch's batch order and augmentation are drawn from ``seed`` + epoch). A checkpoint of other settings (other
+shards, options or starting model) is refused by name. The checkpoint is removed once the model is saved. On 2
+CPU cores a run over the whole dataset takes longer than a working session; commit the checkpoint
+(``--resume-file`` inside the repository) to go on from it on another machine.
 """
 
 from __future__ import annotations
@@ -29,6 +37,8 @@ from __future__ import annotations
 import argparse
 import copy
 import dataclasses
+import functools
+import hashlib
 import json
 import pathlib
 import sys
@@ -36,16 +46,39 @@ import time
 from typing import Any
 
 import numpy as np
+import torch as th
 from torch.optim.swa_utils import AveragedModel
 
 from sb3_pixeldqn.distill import DEFAULT_WEIGHTS, LabelledStates, LossOptions, distill, evaluate
-from shelf_env.files import write_json_atomically
+from shelf_env.files import write_atomically, write_json_atomically
 from shelf_env.privileged import dataset
 
 
 def report_path(model: str | pathlib.Path) -> pathlib.Path:
     """Where the report of the model saved at ``model`` goes: beside it, ``NAME.distill.json``."""
     return pathlib.Path(model).with_suffix(".distill.json")
+
+
+def resume_path(model: str | pathlib.Path) -> pathlib.Path:
+    """Where a run saving ``model`` checkpoints its epochs by default: beside it, ``NAME.resume.pt``."""
+    return pathlib.Path(model).with_suffix(".resume.pt")
+
+
+def load_checkpoint(path: pathlib.Path, settings: dict[str, Any]) -> dict[str, Any] | None:
+    """The epoch checkpoint at ``path`` if there is one, checked to be of a run with these ``settings``; None if
+    there is none. A checkpoint of other settings, or one that cannot be read, is a `ValueError` naming it."""
+    if not path.exists():
+        return None
+    try:
+        state = th.load(path, map_location="cpu", weights_only=False)
+        stored = state["settings"]
+    except Exception as err:  # a truncated or foreign file
+        raise ValueError(f"{path} is not a readable distillation checkpoint ({err}); remove it to start over") from err
+    if stored != settings:
+        differ = sorted(k for k in settings.keys() | stored.keys() if settings.get(k) != stored.get(k))
+        raise ValueError(f"{path} is the checkpoint of a run with other settings ({', '.join(differ)}); remove it "
+                         "or give another --resume-file to start this one")
+    return state
 
 
 def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[list[int], list[int]]:
@@ -114,7 +147,8 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         max_states: int | None = None, batch_states: int = 16, loss: LossOptions = LossOptions(),
         learning_rate: float | None = None, seed: int = 0, max_shards: int | str | None = None,
         augment: bool = True, masks: bool = True, progress: bool = True, anchor: float = 0.0,
-        average_last: int = 1, last_out: pathlib.Path | None = None) -> dict[str, Any]:
+        average_last: int = 1, last_out: pathlib.Path | None = None,
+        resume_file: pathlib.Path | None = None) -> dict[str, Any]:
     """Distil ``data`` into the model of ``init`` and save it as ``out``; returns the report. ``augment``:
     draw each batch's states through the model's own augmentation (its exact symmetries), as its training did.
     ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions).
@@ -125,7 +159,8 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     weights at the end of each of the last that many epochs (one model from a stretch of training rather than the
     last step's draw; the report's ``averaged`` holds its validation); 1: the last epoch's. ``last_out``: with
     ``average_last`` > 1, also save the last epoch's weights there (the model a run without averaging saves, since
-    distillation is deterministic for a seed), its report beside it."""
+    distillation is deterministic for a seed), its report beside it. ``resume_file``: the epoch checkpoint (default
+    `resume_path` of ``out``; module docstring)."""
     from sb3_pixeldqn import PixelDoubleDQN
 
     if epochs < 1 or not 0 <= val_fraction < 1:
@@ -155,10 +190,26 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     start = time.monotonic()
     history: list[dict[str, Any]] = []
     mean_net = AveragedModel(model.q_net) if average_last > 1 else None  # the equal-weight running mean
-    if val is not None:  # the starting model, for comparison
+    checkpoint = resume_path(out) if resume_file is None else pathlib.Path(resume_file)
+    settings = {"init_sha256": hashlib.sha256(pathlib.Path(init).read_bytes()).hexdigest(),
+                "shards": [s.path.name for s in shards], "val_fraction": val_fraction, "max_states": max_states,
+                "batch_states": batch_states, "loss": dataclasses.asdict(loss), "learning_rate": learning_rate,
+                "seed": seed, "augment": augment, "masks": masks, "progress": progress, "anchor": anchor,
+                "average_last": average_last, "epochs": epochs}
+    resumed = load_checkpoint(checkpoint, settings)
+    first_epoch, before = 0, 0.0
+    if resumed is not None:  # go on after the last finished epoch
+        model.q_net.load_state_dict(resumed["q_net"])
+        model.q_net_target.load_state_dict(resumed["q_net_target"])
+        model.policy.optimizer.load_state_dict(resumed["optimizer"])
+        if mean_net is not None:
+            mean_net.load_state_dict(resumed["mean_net"])
+        history, first_epoch, before = resumed["history"], int(resumed["epoch"]), float(resumed["seconds"])
+        print(json.dumps({"resumed": str(checkpoint), "after_epoch": first_epoch}), flush=True)
+    elif val is not None:  # the starting model, for comparison
         history.append({"epoch": 0, "val": evaluate(model.policy, val, val_loss)})
         print(json.dumps(history[-1]), flush=True)
-    for epoch in range(epochs):
+    for epoch in range(first_epoch, epochs):
         row: dict[str, Any] = {"epoch": epoch + 1, "train": distill(model, train, 1, batch_states, loss,
                                                                      seed=seed + epoch, augment=transforms,
                                                                      anchor=anchor, anchor_net=anchor_net)[0]}
@@ -168,6 +219,11 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         print(json.dumps(row), flush=True)
         if mean_net is not None and epoch >= epochs - average_last:
             mean_net.update_parameters(model.q_net)
+        state = {"settings": settings, "epoch": epoch + 1, "history": history,
+                 "seconds": before + time.monotonic() - start, "q_net": model.q_net.state_dict(),
+                 "q_net_target": model.q_net_target.state_dict(), "optimizer": model.policy.optimizer.state_dict(),
+                 "mean_net": None if mean_net is None else mean_net.state_dict()}
+        write_atomically(checkpoint, functools.partial(th.save, state))
     averaged: dict[str, Any] | None = None
     if last_out is not None:  # the last epoch's weights, before the mean replaces them
         model.save(last_out)
@@ -188,11 +244,12 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "progress_weight": loss.weights[3], "teacher_temperature": loss.teacher_temperature,
               "seed": seed, "batch_states": batch_states, "learning_rate": learning_rate,
               "average_last": average_last, **({"averaged": averaged} if averaged is not None else {}),
-              "seconds": round(time.monotonic() - start, 1), "history": history}
+              "seconds": round(before + time.monotonic() - start, 1), "history": history}
     if last_out is not None:  # the plain model's report: this run's, without the mean
         plain = {k: v for k, v in report.items() if k != "averaged"} | {"out": str(last_out), "average_last": 1}
         write_json_atomically(report_path(last_out), plain)
     write_json_atomically(report_path(out), report)
+    checkpoint.unlink(missing_ok=True)  # the run is done: nothing to go on from
     return report
 
 
@@ -230,6 +287,8 @@ def main(argv: list[str] | None = None) -> int:
                    "the last this many epochs (1: the last epoch's weights)")
     p.add_argument("--last-out", type=pathlib.Path, default=None, help="with --average-last: also save the last "
                    "epoch's own weights (and their report) here")
+    p.add_argument("--resume-file", type=pathlib.Path, default=None, help="the epoch checkpoint this run writes "
+                   "and goes on from (default: NAME.resume.pt beside --out)")
     args = p.parse_args(argv)
     try:
         loss = LossOptions(args.margin, (1.0, 1.0, args.teacher_weight, args.progress_weight), args.teacher_radius,
@@ -237,7 +296,7 @@ def main(argv: list[str] | None = None) -> int:
         run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
             loss, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
             masks=args.teacher_over == "masked", progress=not args.no_progress, anchor=args.anchor,
-            average_last=args.average_last, last_out=args.last_out)
+            average_last=args.average_last, last_out=args.last_out, resume_file=args.resume_file)
     except ValueError as err:
         print(f"distill: error: {err}", file=sys.stderr)
         return 2
