@@ -190,6 +190,8 @@ for v in "${V90[@]}"; do P+=("$M/$v.zip"); done
   --runs 30 --seeds 3 --first-seed 2000 --object-sets ycb --out "$DIR/val90" --summarize-only
 # The nineteenth session: the eleventh point, all 649 shards at its start (55 + 50 + 205 + 184 of series 3 + 155 of
 # series 4), averaged and plain from one run (the curve reads the plain one: results/distill_test/run.sh)
+# (longer than a session on 2 cores: it checkpoints each epoch into the committed resume file and goes on from it)
 SHARDS=s00:55,s01:50,s02:205,s03:184,s04:155 distil p_s_dagger594_aug_mpa_r2_ce1_avg4 all --anchor 1.0 \
-  --teacher-radius 2 --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger594_aug_mpa_r2_ce1.zip"
+  --teacher-radius 2 --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger594_aug_mpa_r2_ce1.zip" \
+  --resume-file "$DIR/p_s_dagger594_aug_mpa_r2_ce1_avg4.resume.pt"
 cp "$M/p_s_dagger594_aug_mpa_r2_ce1.distill.json" "$DIR/"
