@@ -245,9 +245,9 @@ def test_average_last_saves_the_mean_of_the_last_epochs_weights(one_shard: pathl
 def test_a_stopped_distillation_goes_on_from_its_last_epoch_to_the_same_weights(
         one_shard: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    """A run stopped after its first of three epochs, started again, ends with the weights and history of a run that
-    never stopped (the optimiser's state and the running mean restored); its checkpoint is then gone. A checkpoint
-    of other settings, or an unreadable one, is refused by name."""
+    """A run stopped in the last of its three epochs, started again, ends with the weights and history of a run that
+    never stopped (the optimiser's state and the running mean, which holds epoch 2 by then, restored); its checkpoint
+    is then gone. A checkpoint of other settings, or an unreadable one, is refused by name."""
     import torch
 
     from sb3_pixeldqn import PixelDoubleDQN
@@ -259,13 +259,13 @@ def test_a_stopped_distillation_goes_on_from_its_last_epoch_to_the_same_weights(
     assert not distill_cli.resume_path(tmp_path / "whole.zip").exists()  # a finished run leaves no checkpoint
     real, calls = distill_cli.distill, []
 
-    def stopped_in_epoch_2(*a: object, **k: object) -> object:
+    def stopped_in_epoch_3(*a: object, **k: object) -> object:
         calls.append(1)
-        if len(calls) == 2:
-            raise KeyboardInterrupt  # the session ends during the second epoch
+        if len(calls) == 3:
+            raise KeyboardInterrupt  # the session ends during the third epoch
         return real(*a, **k)
 
-    monkeypatch.setattr(distill_cli, "distill", stopped_in_epoch_2)
+    monkeypatch.setattr(distill_cli, "distill", stopped_in_epoch_3)
     out = tmp_path / "stopped.zip"
     with pytest.raises(KeyboardInterrupt):
         distill_cli.main([*args, "--out", str(out)])
@@ -275,7 +275,7 @@ def test_a_stopped_distillation_goes_on_from_its_last_epoch_to_the_same_weights(
     assert distill_cli.main([*args, "--seed", "1", "--out", str(out)]) == 2  # other settings: refused
     assert f"{checkpoint} is the checkpoint of a run with other settings (seed)" in capsys.readouterr().err
     assert distill_cli.main([*args, "--out", str(out)]) == 0
-    assert '"after_epoch": 1' in capsys.readouterr().out
+    assert '"after_epoch": 2' in capsys.readouterr().out
     whole = PixelDoubleDQN.load(tmp_path / "whole.zip", device="cpu").q_net.state_dict()
     resumed = PixelDoubleDQN.load(out, device="cpu").q_net.state_dict()
     assert all(torch.equal(whole[k], resumed[k]) for k in whole)
