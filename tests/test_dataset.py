@@ -4,6 +4,7 @@ refused by name, and a collection stopped mid-shard leaves nothing behind."""
 from __future__ import annotations
 
 import json
+import os
 import pathlib
 
 import numpy as np
@@ -160,12 +161,16 @@ def test_bad_shards_are_refused_by_name(one_shard: pathlib.Path, tmp_path: pathl
 
 
 def test_bad_collect_arguments_are_one_line_errors(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path) -> None:
+    niceness = os.nice(0)
     assert dataset.main(["collect", "--out", str(tmp_path), "--ns", "0"]) == 2
     assert "ns must be numbers of objects" in capsys.readouterr().err
     assert dataset.main(["collect", "--out", str(tmp_path), "--explore", "1.5", "--model", "none"]) == 2
     assert "explore in [0, 1]" in capsys.readouterr().err
     assert dataset.main(["collect", "--out", str(tmp_path), "--model", str(tmp_path / "missing.zip")]) == 2
     assert "does not exist" in capsys.readouterr().err
+    assert dataset.main(["collect", "--out", str(tmp_path), "--nice", "20"]) == 2
+    assert "niceness must be in 0..19, got 20" in capsys.readouterr().err
+    assert os.nice(0) == niceness  # refused before the collection lowered its own priority
     assert list(tmp_path.iterdir()) == []
 
 

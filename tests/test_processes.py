@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import pathlib
 import signal
@@ -11,7 +12,7 @@ import time
 
 import pytest
 
-from shelf_env.processes import exit_with_parent
+from shelf_env.processes import exit_with_parent, yield_cpu
 
 # a parent that starts a spawned pool worker (the initializer under test), prints the worker's pid,
 # then waits to be killed
@@ -68,3 +69,31 @@ def test_an_orphan_ends_at_once_and_the_interval_is_checked() -> None:
     assert done.returncode == 1 and time.monotonic() - started < 25
     with pytest.raises(ValueError, match="interval must be > 0"):
         exit_with_parent(os.getpid(), interval=0)
+
+
+YIELD = """
+import json, os
+from shelf_env.processes import AUTOGROUP, yield_cpu
+def group():
+    return open(AUTOGROUP).read().split()[-1] if os.path.exists(AUTOGROUP) else None
+before = group()
+now, set_to = yield_cpu(5)
+print(json.dumps({"now": now, "set_to": set_to, "before": before, "after": group()}))
+"""
+
+
+@pytest.mark.parametrize("leader", [False, True])
+def test_yield_cpu_lowers_the_process_and_only_its_own_session_s_group(leader: bool) -> None:
+    """The process's niceness rises by the amount asked; the session's CPU group (Linux autogroup) is lowered only
+    where the process leads its own session (``setsid``), never a group it shares with the shell that started it."""
+    done = subprocess.run([sys.executable, "-c", YIELD], capture_output=True, text=True, timeout=60,
+                          start_new_session=leader, cwd=pathlib.Path(__file__).resolve().parents[1])
+    assert done.returncode == 0, done.stderr
+    out = json.loads(done.stdout)
+    assert out["now"] == min(19, os.nice(0) + 5)
+    if not leader:
+        assert out["set_to"] is None and out["after"] == out["before"]
+    elif out["set_to"] is not None:  # written where this system lets a process change its group
+        assert out["set_to"] == 5 and out["after"] == "5"
+    with pytest.raises(ValueError, match="niceness must be in 0..19, got 20"):
+        yield_cpu(20)

@@ -70,7 +70,7 @@ from shelf_env.evaluation.protocol import greedy_action, policy_digest, takes_ac
 from shelf_env.files import write_atomically
 from shelf_env.policies import POLICIES, make_policy, policy_file
 from shelf_env.privileged.lookahead import LookaheadHeuristic, Outcome, probe_outcome
-from shelf_env.processes import exit_with_parent
+from shelf_env.processes import exit_with_parent, yield_cpu
 
 #: Version of the shard layout below; a shard of another is refused.
 FORMAT = 1
@@ -442,13 +442,9 @@ def transitions(shards: Sequence[Shard], invalid_reward: float = params.REWARD_I
     return Transitions(obs, *(np.concatenate([p[i] for p in parts]) for i in range(6)))
 
 
-def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence[int] = DEFAULT_NS,
-            model_path: str | None = "examples/pretrained/v1/p_s.zip", episodes_per_shard: int = 2,
-            max_shards: int | None = None, explore: float = 0.3, max_probes: int = 24,
-            object_set: str = "train", teacher: str = "h-d-lookahead") -> int:
-    """Collect shards of series ``series`` into ``out`` until ``hours`` of wall clock have passed (a shard
-    under way is finished first) or ``max_shards`` exist; shards on disk are skipped, so it resumes.
-    Returns the number of shards written."""
+def check_collection(hours: float, ns: Sequence[int], model_path: str | None, episodes_per_shard: int,
+                     explore: float, max_probes: int, teacher: str) -> None:
+    """`collect`'s arguments checked before anything runs: a `ValueError` naming the first bad one."""
     if hours <= 0:
         raise ValueError(f"hours must be > 0, got {hours}")
     if not ns or min(ns) < 1 or max(ns) > 14:
@@ -459,6 +455,16 @@ def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence
         raise ValueError("episodes_per_shard and max_probes must be >= 1 and explore in [0, 1]")
     if model_path is not None and not pathlib.Path(policy_file(model_path)).is_file():
         raise ValueError(f"driving model {policy_file(model_path)!r} does not exist")
+
+
+def collect(out: pathlib.Path, series: int = 0, hours: float = 1.0, ns: Sequence[int] = DEFAULT_NS,
+            model_path: str | None = "examples/pretrained/v1/p_s.zip", episodes_per_shard: int = 2,
+            max_shards: int | None = None, explore: float = 0.3, max_probes: int = 24,
+            object_set: str = "train", teacher: str = "h-d-lookahead") -> int:
+    """Collect shards of series ``series`` into ``out`` until ``hours`` of wall clock have passed (a shard
+    under way is finished first) or ``max_shards`` exist; shards on disk are skipped, so it resumes.
+    Returns the number of shards written."""
+    check_collection(hours, ns, model_path, episodes_per_shard, explore, max_probes, teacher)
     env = gym.make("ShelfSort-v0", num_objects=max(ns), object_set=object_set, primitives=PRIMITIVES,
                    pixel_size=PIXEL_SIZE)
     start, written, shard = time.monotonic(), 0, 0
@@ -558,6 +564,9 @@ def main(argv: list[str] | None = None) -> int:
                    "falls, as in DAgger)")
     c.add_argument("--teacher", choices=TEACHERS, default="h-d-lookahead", help="the privileged teacher whose choice "
                    "is executed and labelled")
+    c.add_argument("--nice", type=int, default=10, help="lower the collection's CPU priority by this much (0..19; "
+                   "with its own session's group where it leads one: shelf_env.processes.yield_cpu), so that it "
+                   "runs beside other work; 0 leaves it")
     s = sub.add_parser("status", help="print what the dataset holds")
     s.add_argument("folder", type=pathlib.Path, nargs="?", default=pathlib.Path("data/teacher"),
                    help="the dataset folder")
@@ -573,6 +582,9 @@ def main(argv: list[str] | None = None) -> int:
                  "episodes_per_shard": args.episodes_per_shard, "max_shards": args.max_shards,
                  "max_probes": args.max_probes, "teacher": args.teacher, "explore": args.explore}
                 for k in range(args.workers)]
+        check_collection(**{k: jobs[0][k] for k in ("hours", "ns", "model_path", "episodes_per_shard", "explore",
+                                                     "max_probes", "teacher")})
+        yield_cpu(args.nice)  # once the arguments hold, before any worker starts: they inherit it
         if args.workers == 1:
             written = [_collect_worker(jobs[0])]
         else:
