@@ -577,13 +577,13 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.workers < 1:
             raise ValueError(f"--workers must be >= 1, got {args.workers}")
+        model_path = None if args.model == "none" else args.model
+        check_collection(args.hours, args.ns, model_path, args.episodes_per_shard, args.explore, args.max_probes,
+                         args.teacher)
         jobs = [{"out": args.out, "series": args.series + k, "hours": args.hours, "ns": tuple(args.ns),
-                 "model_path": None if args.model == "none" else args.model,
-                 "episodes_per_shard": args.episodes_per_shard, "max_shards": args.max_shards,
-                 "max_probes": args.max_probes, "teacher": args.teacher, "explore": args.explore}
-                for k in range(args.workers)]
-        check_collection(**{k: jobs[0][k] for k in ("hours", "ns", "model_path", "episodes_per_shard", "explore",
-                                                     "max_probes", "teacher")})
+                 "model_path": model_path, "episodes_per_shard": args.episodes_per_shard,
+                 "max_shards": args.max_shards, "max_probes": args.max_probes, "teacher": args.teacher,
+                 "explore": args.explore} for k in range(args.workers)]
         yield_cpu(args.nice)  # once the arguments hold, before any worker starts: they inherit it
         if args.workers == 1:
             written = [_collect_worker(jobs[0])]
