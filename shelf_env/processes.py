@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["exit_with_parent", "worker_initializer", "yield_cpu"]
+__all__ = ["autogroup_niceness", "exit_with_parent", "worker_initializer", "yield_cpu"]
 
 #: Linux's per-session CPU group of this process (``sched_autogroup``), absent on other systems.
 AUTOGROUP = "/proc/self/autogroup"
@@ -46,6 +46,18 @@ def worker_initializer(parent_pid: int, then: Callable[..., Any] | None = None, 
         then(*args)
 
 
+def autogroup_niceness() -> int | None:
+    """The niceness of this process's session CPU group (Linux ``sched_autogroup``), or None where it has none:
+    another system, autogroups switched off, or a process in a group that is not an autogroup (a container's
+    cgroup), where the kernel's file exists but reads empty."""
+    try:
+        with open(AUTOGROUP) as f:
+            words = f.read().split()
+        return int(words[-1]) if words else None
+    except (OSError, ValueError):
+        return None
+
+
 def yield_cpu(niceness: int) -> tuple[int, int | None]:
     """Lower this process's CPU priority by ``niceness`` (0..19, ``os.nice``), and, where it leads its own session
     (started with ``setsid``) on a Linux with autogroups, its session's group's too; returns the process's niceness
@@ -64,8 +76,8 @@ def yield_cpu(niceness: int) -> tuple[int, int | None]:
         try:
             with open(AUTOGROUP, "w") as f:
                 f.write(str(niceness))
-            with open(AUTOGROUP) as f:
-                group = int(f.read().split()[-1])
-        except (OSError, ValueError):  # not permitted here (a container's /proc): the process's niceness stands
-            group = None
+        except OSError:  # not permitted here (a container's /proc): the process's niceness stands
+            pass
+        else:
+            group = autogroup_niceness()
     return now, group

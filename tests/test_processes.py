@@ -12,7 +12,8 @@ import time
 
 import pytest
 
-from shelf_env.processes import exit_with_parent, yield_cpu
+import shelf_env.processes
+from shelf_env.processes import autogroup_niceness, exit_with_parent, yield_cpu
 
 # a parent that starts a spawned pool worker (the initializer under test), prints the worker's pid,
 # then waits to be killed
@@ -73,12 +74,10 @@ def test_an_orphan_ends_at_once_and_the_interval_is_checked() -> None:
 
 YIELD = """
 import json, os
-from shelf_env.processes import AUTOGROUP, yield_cpu
-def group():
-    return open(AUTOGROUP).read().split()[-1] if os.path.exists(AUTOGROUP) else None
-before = group()
+from shelf_env.processes import autogroup_niceness, yield_cpu
+before = autogroup_niceness()
 now, set_to = yield_cpu(5)
-print(json.dumps({"now": now, "set_to": set_to, "before": before, "after": group()}))
+print(json.dumps({"now": now, "set_to": set_to, "before": before, "after": autogroup_niceness()}))
 """
 
 
@@ -94,6 +93,19 @@ def test_yield_cpu_lowers_the_process_and_only_its_own_session_s_group(leader: b
     if not leader:
         assert out["set_to"] is None and out["after"] == out["before"]
     elif out["set_to"] is not None:  # written where this system lets a process change its group
-        assert out["set_to"] == 5 and out["after"] == "5"
+        assert out["set_to"] == 5 and out["after"] == 5
     with pytest.raises(ValueError, match="niceness must be in 0..19, got 20"):
         yield_cpu(20)
+
+
+@pytest.mark.parametrize(("text", "expected"), [("/autogroup-12 nice 5\n", 5), ("/autogroup-3 nice 0\n", 0),
+                                                ("", None), ("/autogroup-3 nice ?\n", None)])
+def test_autogroup_niceness_reads_the_kernel_s_line_and_none_where_there_is_no_group(
+        tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, text: str, expected: int | None) -> None:
+    """An empty file is what a process outside any autogroup reads (a container's cgroup, CI): None, not a crash."""
+    path = tmp_path / "autogroup"
+    path.write_text(text)
+    monkeypatch.setattr(shelf_env.processes, "AUTOGROUP", str(path))
+    assert autogroup_niceness() == expected
+    monkeypatch.setattr(shelf_env.processes, "AUTOGROUP", str(tmp_path / "absent"))
+    assert autogroup_niceness() is None
