@@ -290,6 +290,41 @@ def test_run_episode_reports_a_looping_policy_as_a_loop():
     assert row["loop_rate"] == 1.0 and row["timeout_rate"] == 0.0
 
 
+def test_an_episode_records_the_counters_of_every_wrapper_in_the_chain():
+    """The outermost layer's counters keep their names, a wrapped layer's are prefixed by its class, and an episode
+    records each counter's increment during it (not the running total)."""
+
+    class Counting:
+        def __init__(self, policy, key):
+            self.policy, self.key, self.stats = policy, key, {key: 0, "masked": 0}
+
+        def predict(self, obs, deterministic=True):
+            self.stats[self.key] += 1
+            self.stats["masked"] += 2
+            return self.policy.predict(obs, deterministic=deterministic)
+
+    class InnerGuard(Counting):
+        pass
+
+    class SameAction:
+        stats = "not a dict of counters: left out"
+
+        def predict(self, obs, deterministic=True):
+            return np.array(0), None
+
+    agent = Counting(InnerGuard(SameAction(), "guarded"), "outer")
+    agent.policy.stats["guarded"] = 7  # counted before this episode
+    assert ev.policy_counters(agent) == {"outer": 0, "masked": 0, "inner_guard.guarded": 7, "inner_guard.masked": 0}
+    env = gym.make("ShelfSort-v0", num_objects=1, max_actions=3)
+    out = ev.run_episode(env, agent, reset_seed=3)
+    env.close()
+    assert out["policy_stats"] == {"outer": 3, "masked": 6, "inner_guard.guarded": 3, "inner_guard.masked": 6}
+    assert ev.snake_case("FallFilter") == "fall_filter" and ev.snake_case("LoopBreaker") == "loop_breaker"
+    looped = Counting(None, "x")
+    looped.policy = looped  # a chain that comes back to itself ends
+    assert ev.policy_counters(looped) == {"x": 0, "masked": 0}
+
+
 def test_evaluation_under_conditions_and_one_condition_set_per_folder(tmp_path, capsys):
     grid = ["--policies", "h-d", "--ns", "1", "--runs", "2", "--seeds", "1", "--object-sets", "train",
             "--workers", "1"]

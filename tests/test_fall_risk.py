@@ -242,6 +242,8 @@ def test_the_evaluation_plays_a_checkpoint_under_its_fall_filter(tmp_path):
     try:
         agent = ev.make_policy(policy, env)
         assert isinstance(agent, LoopBreaker) and isinstance(agent.policy, fr.FallFilter)
+        wrapped = ev.run_episode(env, agent, ev.scene_seed(0, 2, 0))["policy_stats"]
+        assert set(wrapped) == {"bans", "redirects", "fall_filter.masked", "fall_filter.unfiltered"}
         record = ev.run_episode(env, ev.make_policy(zip_path + fr.FALL_FILTER, env), ev.scene_seed(0, 2, 0))
         assert set(record["policy_stats"]) == {"masked", "unfiltered"}
     finally:

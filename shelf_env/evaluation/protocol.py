@@ -69,8 +69,9 @@ class EpisodeRecord:
     #: before this field existed).
     failure: str = ""
     max_repeat: int = 0  # longest run of one action repeated back to back
-    #: The episode's share of the policy's own counters, for a policy with a ``stats`` dict of ints
-    #: (the lookahead's vetoes and unavoidable steps, `shelf_env.privileged.lookahead.STAT_KEYS`); empty otherwise.
+    #: The episode's share of the policy's counters (`policy_counters`: its own ``stats`` dict of ints, such as the
+    #: lookahead's vetoes and unavoidable steps, `shelf_env.privileged.lookahead.STAT_KEYS`, and those of the
+    #: policies it wraps as ``<wrapper>.<counter>``); empty for a policy without any.
     policy_stats: dict[str, int] = field(default_factory=dict)
     #: The machine that played the episode (`machine_label`), "" for cells written before this
     #: field existed. Episodes are bit-identical on one machine, not across machines.
@@ -138,6 +139,29 @@ def greedy_action(env: gym.Env, policy: Any, obs: Any, first: bool, masked: bool
     return int(np.asarray(action).reshape(-1)[0])
 
 
+def policy_counters(policy: Any) -> dict[str, int]:
+    """The counters of ``policy`` and of every test-time wrapper under it: the ``stats`` dict of ints of each layer
+    down its ``.policy`` chain (`shelf_env.fall_filter.FallFilter`, `shelf_env.pick_guard.PickGuard`,
+    `sb3_pixeldqn.LoopBreaker`, ...). The outermost layer's counters keep their names; a wrapped layer's are named
+    ``<layer's class in snake case>.<counter>`` (``fall_filter.masked``), since two layers may count under one name
+    (the filter and the guard both count ``masked``)."""
+    counters: dict[str, int] = {}
+    layer, seen = policy, set()
+    while layer is not None and id(layer) not in seen:
+        seen.add(id(layer))
+        stats = getattr(layer, "stats", None)
+        if isinstance(stats, dict):
+            prefix = "" if layer is policy else snake_case(type(layer).__name__) + "."
+            counters.update({prefix + str(key): int(value) for key, value in stats.items()})
+        layer = getattr(layer, "policy", None)
+    return counters
+
+
+def snake_case(name: str) -> str:
+    """``FallFilter`` -> ``fall_filter``."""
+    return "".join("_" + c.lower() if c.isupper() and i else c.lower() for i, c in enumerate(name))
+
+
 def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = params.MAX_ACTIONS) -> dict:
     """Roll out ``policy`` greedily from the scene of ``reset_seed``; success needs < ``max_actions`` actions.
 
@@ -145,10 +169,10 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
     MaskablePPO evaluation does, unless it was trained with ``masked=False``; the heuristics choose
     among object cells by construction. A policy whose ``predict`` takes SB3's ``episode_start``
     gets it (True at the first step): a policy with memory (a `LoopBreaker`) forgets the last
-    episode there. A policy with a
-    ``stats`` dict of counters gets the episode's increments recorded (``policy_stats``).
+    episode there. The episode's increments of the policy's counters (`policy_counters`: its own and its wrapped
+    layers') are recorded (``policy_stats``).
     """
-    stats_before = dict(getattr(policy, "stats", None) or {})
+    stats_before = policy_counters(policy)
     obs, info = env.reset(seed=reset_seed)
     unsorted = info["num_unsorted_initial"]
     masked, starts = takes_action_masks(policy), predict_takes(policy, "episode_start")
@@ -166,10 +190,10 @@ def run_episode(env: gym.Env, policy: Any, reset_seed: int, max_actions: int = p
     success = bool(info["is_success"]) and actions < max_actions
     failure = classify_failure(success, bool(info["fell"]), bool(terminated), actions, noops, max_repeat,
                                "relabelled" in info)
-    stats = getattr(policy, "stats", None) or {}
+    stats = policy_counters(policy)
     return {"success": success, "actions": actions, "num_unsorted_initial": int(unsorted), "fell": bool(info["fell"]),
             "noops": noops, "failure": failure, "max_repeat": max_repeat,
-            "policy_stats": {key: int(value) - int(stats_before.get(key, 0)) for key, value in stats.items()}}
+            "policy_stats": {key: value - stats_before.get(key, 0) for key, value in stats.items()}}
 
 
 #: Env options an evaluation may set (the rest of the env is fixed by the protocol and the policy).
