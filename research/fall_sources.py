@@ -22,16 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from sb3_pixeldqn.loop_breaker import predict_takes
 from shelf_env.baselines.heuristics import object_blobs
-from shelf_env.evaluation.falls import RESCUE
+from shelf_env.evaluation.falls import RESCUE, measure_episode
 from shelf_env.evaluation.protocol import (
     check_ns,
-    greedy_action,
     make_env,
     make_policy,
     scene_seed,
-    takes_action_masks,
 )
 from shelf_env.fall_filter import GeometryRisk, geometry_risk_path
 from shelf_env.files import write_json_atomically
@@ -51,27 +48,22 @@ def episode_decisions(env: Any, policy: Any, rescue: Any, risk: GeometryRisk | N
     many objects each would have left sorted."""
     unwrapped: Any = env.unwrapped
     maps, rows, cols = tuple(unwrapped.map_names), int(unwrapped.rows), int(unwrapped.cols)
-    masked, starts = takes_action_masks(policy), predict_takes(policy, "episode_start")
-    obs, _ = env.reset(seed=reset_seed)
     decisions: list[dict] = []
-    while True:
-        action = greedy_action(env, policy, obs, not decisions, masked, starts)
+
+    def record(obs: np.ndarray, action: int, outcome: Any) -> None:
         primitive, cell = divmod(action, rows * cols)
         row, col = divmod(cell, cols)
-        outcome = probe_outcome(env, action)
-        record = {"map": maps[primitive], "row": row, "col": col, "invalid": not outcome.valid,
-                  "fell": bool(outcome.fell), "sorted": outcome.num_sorted, "risk": None}
+        decision = {"map": maps[primitive], "row": row, "col": col, "invalid": not outcome.valid,
+                    "fell": bool(outcome.fell), "sorted": outcome.num_sorted, "risk": None}
         if risk is not None and maps[primitive] == "pick":
             risk_map = risk.risk(np.asarray(obs))
-            record["risk"] = float(risk_map[row, col])
+            decision["risk"] = float(risk_map[row, col])
             if alternatives:
-                record.update(safest_cell(env, obs, risk_map, primitive * rows * cols, row, col))
-        decisions.append(record)
-        if not outcome.valid:
-            action = int(np.asarray(rescue.predict(obs, deterministic=True)[0]).reshape(-1)[0])
-        obs, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            return decisions
+                decision.update(safest_cell(env, obs, risk_map, primitive * rows * cols, row, col))
+        decisions.append(decision)
+
+    measure_episode(env, policy, rescue, reset_seed, run=0, on_decision=record)
+    return decisions
 
 
 def safest_cell(env: Any, obs: np.ndarray, risk_map: np.ndarray, offset: int, row: int, col: int) -> dict[str, Any]:

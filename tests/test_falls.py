@@ -64,3 +64,23 @@ def test_bad_arguments_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
     assert "runs must be >= 1" in capsys.readouterr().err
     assert falls.main(["h-d", "--ns", "99"]) == 2
     assert "99" in capsys.readouterr().err
+
+
+def test_fall_sources_records_each_decision_the_measurement_probes(measured: list[falls.FallEpisode]) -> None:
+    """research.fall_sources rides on `falls.measure_episode` (its ``on_decision`` hook): one record per probed
+    decision, with the same invalid and fallen counts as the measurement of the same scenes."""
+    from research import fall_sources
+    from shelf_env.policies import POLICIES
+
+    env = ev.make_env(MODEL, N, "ycb")
+    try:
+        agent = ev.make_policy(MODEL, env, seed=ev.scene_seed(SEED, N, 10**6))
+        rescue = POLICIES[falls.RESCUE](env, 0)
+        for episode in measured:
+            decisions = fall_sources.episode_decisions(env, agent, rescue, None, ev.scene_seed(SEED, N, episode.run))
+            assert len(decisions) == episode.decisions
+            assert sum(d["invalid"] for d in decisions) == episode.invalid
+            assert sum(d["fell"] for d in decisions) == episode.fell
+            assert all(d["risk"] is None and d["map"] in ("pick", "push_left", "push_right") for d in decisions)
+    finally:
+        env.close()

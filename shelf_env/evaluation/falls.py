@@ -28,6 +28,7 @@ import argparse
 import json
 import pathlib
 import sys
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -69,9 +70,11 @@ class FallEpisode:
 
 
 def measure_episode(env: Any, policy: Any, rescue: Any, reset_seed: int, run: int,
-                    max_actions: int = params.MAX_ACTIONS) -> FallEpisode:
+                    max_actions: int = params.MAX_ACTIONS,
+                    on_decision: Callable[[np.ndarray, int, Any], None] | None = None) -> FallEpisode:
     """Play ``policy`` greedily from the scene of ``reset_seed``, probing each of its actions first
-    (module docstring)."""
+    (module docstring). ``on_decision(obs, action, outcome)``, where given, sees each greedy decision and its probed
+    outcome (`probe_outcome`) before the env steps (a research script's per-decision record)."""
     masked, starts = takes_action_masks(policy), predict_takes(policy, "episode_start")
     obs, _ = env.reset(seed=reset_seed)
     decisions = invalid = fell = 0
@@ -79,6 +82,8 @@ def measure_episode(env: Any, policy: Any, rescue: Any, reset_seed: int, run: in
     while True:
         action = greedy_action(env, policy, obs, decisions == 0, masked, starts)
         outcome = probe_outcome(env, action)
+        if on_decision is not None:
+            on_decision(obs, action, outcome)
         if not outcome.valid:
             invalid += 1
             fell += int(outcome.fell)
