@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# New Q-maps under the shipped wrappers (docs/experiments/own-states.md): candidate A, the scaling curve's eleventh
+# point (averaged weights); candidate B, the shipped p_s.zip fine-tuned on series 5 (the teacher's labels of the
+# shipped policy's own states); both played under the shipped geometry filter (its risk model copied beside each),
+# the pick guard and the loop breaker on the 270 validation scenes. The shipped policy's cells are copied (by label
+# and digest) from results/stricter_filter/val90.
+# Usage: bash results/own_states/run.sh [a|b|val|all]   (WORKERS=2 for two processes)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+out=results/own_states
+M=runs/distill_scaling
+risk=results/fall_geometry/filter/p_s_geo10.geometry_risk.pt  # the shipped filter's risk model (threshold 0.1)
+shipped=results/fall_geometry/filter/p_s_geo10.zip+geometry-filter+pick-guard+loop-breaker
+old=p_s_geo10+geometry-filter+pick-guard+loop-breaker  # the shipped policy's cells' label
+wrap=+geometry-filter+pick-guard+loop-breaker
+a=p_s_dagger594_aug_mpa_r2_ce1_avg4  # candidate A
+b=p_s_own5  # candidate B
+S05=s05:26  # every series-5 shard complete when B's run started (17:xx, twentieth session)
+step=${1:-all}
+if [[ $step == a || $step == all ]]; then
+  if [ ! -f "$out/$a.zip" ]; then
+    [ -f "$M/$a.zip" ] || bash results/distill_scaling/run.sh
+    cp -p "$M/$a.zip" "$M/$a.distill.json" "$out/"
+  fi
+  cp -p "$risk" "$out/$a.geometry_risk.pt"
+fi
+if [[ $step == b || $step == all ]]; then
+  [ -f "$out/$b.zip" ] || OMP_NUM_THREADS=2 python -m shelf_env.training.distill --data data/teacher \
+      --max-shards "$S05" --init examples/pretrained/p_s.zip --out "$out/$b.zip" --epochs 8 --val-fraction 0.2 \
+      --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 4 2>&1 | tee "$out/$b.log"
+  cp -p "$risk" "$out/$b.geometry_risk.pt"
+fi
+if [[ $step == val || $step == all ]]; then
+  # validation: seeds 2000-2002, N = 5, 8, 11
+  python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" --ns 5,8,11 --seeds 3 \
+      --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" \
+      --reuse-cells results/stricter_filter/val90
+  for m in $a $b; do
+    python -m shelf_env.evaluation.compare "$out/val90" --pair "$m$wrap" $old --out "$out/val90_pairs_$m.md"
+  done
+fi
