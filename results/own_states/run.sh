@@ -4,7 +4,9 @@
 # shipped policy's own states); both played under the shipped geometry filter (its risk model copied beside each),
 # the pick guard and the loop breaker on the 270 validation scenes. The shipped policy's cells are copied (by label
 # and digest) from results/stricter_filter/val90.
-# Usage: bash results/own_states/run.sh [a|b|val|all]   (WORKERS=2 for two processes)
+# Then (added after the validation, as the plan says) the candidate that passed it, A, on issue 10's held-out scenes:
+# the open-loop grid, then closed loop + safe picks, every other policy's cells copied from results/pick_guard.
+# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|all]   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 out=results/own_states
@@ -15,7 +17,7 @@ old=p_s_geo10+geometry-filter+pick-guard+loop-breaker  # the shipped policy's ce
 wrap=+geometry-filter+pick-guard+loop-breaker
 a=p_s_dagger594_aug_mpa_r2_ce1_avg4  # candidate A
 b=p_s_own5  # candidate B
-S05=s05:26  # every series-5 shard complete when B's run started (17:xx, twentieth session)
+S05=s05:22  # every series-5 shard complete when B's run started (17:44, twentieth session)
 step=${1:-all}
 if [[ $step == a || $step == all ]]; then
   if [ ! -f "$out/$a.zip" ]; then
@@ -38,4 +40,33 @@ if [[ $step == val || $step == all ]]; then
   for m in $a $b; do
     python -m shelf_env.evaluation.compare "$out/val90" --pair "$m$wrap" $old --out "$out/val90_pairs_$m.md"
   done
+fi
+new=$a$wrap  # the candidate that passed validation
+ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results/models_v3)
+others=("$ref=examples/pretrained/p_s.zip" examples/pretrained/s.zip h-d h-a)
+if [[ $step == open || $step == all ]]; then
+  # held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
+  grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out "$out/open")
+  python -m research.evaluate --policies "$out/$new" "${grid[@]}" --workers "${WORKERS:-1}"
+  python -m research.evaluate --policies "$shipped" "${others[@]}" "${grid[@]}" --reuse-cells results/pick_guard/open
+  python -m research.evaluate --policies "$out/$new" "$shipped" "${others[@]}" "${grid[@]}" --summarize-only
+  python -m shelf_env.evaluation.report "$out/open" --learned $new --pick-only s --heuristics h-d h-a
+  python -m shelf_env.evaluation.compare "$out/open" --pair $new $old --pair $new $ref --pair $new h-d \
+      --pair $new h-a --out "$out/open/paired.md"
+fi
+if [[ $step == closed || $step == all ]]; then
+  # held-out, closed loop + safe picks: seed 0, N = 3..14
+  grid=(--ns 3-14 --runs 30 --seeds 1 --object-sets ycb --closed-loop '{}' --safe-picks --out "$out/closed_safe")
+  python -m research.evaluate --policies "$out/$new" "${grid[@]}" --workers "${WORKERS:-1}"
+  python -m research.evaluate --policies "$shipped" "$ref=examples/pretrained/p_s.zip" h-d h-a "${grid[@]}" \
+      --reuse-cells results/pick_guard/closed_safe
+  python -m research.evaluate --policies "$out/$new" "$shipped" "$ref=examples/pretrained/p_s.zip" h-d h-a \
+      "${grid[@]}" --summarize-only
+  python -m shelf_env.evaluation.report "$out/closed_safe" --learned $new --heuristics h-d h-a
+  python -m shelf_env.evaluation.compare "$out/closed_safe" --pair $new $old --pair $new $ref --pair $new h-d \
+      --pair $new h-a --out "$out/closed_safe/paired.md"
+fi
+if [[ $step == falls || $step == all ]]; then
+  # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
+  python -m shelf_env.evaluation.falls "$out/$new" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
 fi
