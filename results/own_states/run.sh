@@ -41,15 +41,16 @@ if [[ $step == val || $step == all ]]; then
     python -m shelf_env.evaluation.compare "$out/val90" --pair "$m$wrap" $old --out "$out/val90_pairs_$m.md"
   done
 fi
-new=$a$wrap  # the candidate that passed validation
+candidate="$out/$a.zip$wrap"  # the candidate that passed validation
+new=$a$wrap  # its cells' label
 ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results/models_v3)
 others=("$ref=examples/pretrained/p_s.zip" examples/pretrained/s.zip h-d h-a)
 if [[ $step == open || $step == all ]]; then
   # held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
   grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out "$out/open")
-  python -m research.evaluate --policies "$out/$new" "${grid[@]}" --workers "${WORKERS:-1}"
+  python -m research.evaluate --policies "$candidate" "${grid[@]}" --workers "${WORKERS:-1}"
   python -m research.evaluate --policies "$shipped" "${others[@]}" "${grid[@]}" --reuse-cells results/pick_guard/open
-  python -m research.evaluate --policies "$out/$new" "$shipped" "${others[@]}" "${grid[@]}" --summarize-only
+  python -m research.evaluate --policies "$candidate" "$shipped" "${others[@]}" "${grid[@]}" --summarize-only
   python -m shelf_env.evaluation.report "$out/open" --learned $new --pick-only s --heuristics h-d h-a
   python -m shelf_env.evaluation.compare "$out/open" --pair $new $old --pair $new $ref --pair $new h-d \
       --pair $new h-a --out "$out/open/paired.md"
@@ -57,10 +58,10 @@ fi
 if [[ $step == closed || $step == all ]]; then
   # held-out, closed loop + safe picks: seed 0, N = 3..14
   grid=(--ns 3-14 --runs 30 --seeds 1 --object-sets ycb --closed-loop '{}' --safe-picks --out "$out/closed_safe")
-  python -m research.evaluate --policies "$out/$new" "${grid[@]}" --workers "${WORKERS:-1}"
+  python -m research.evaluate --policies "$candidate" "${grid[@]}" --workers "${WORKERS:-1}"
   python -m research.evaluate --policies "$shipped" "$ref=examples/pretrained/p_s.zip" h-d h-a "${grid[@]}" \
       --reuse-cells results/pick_guard/closed_safe
-  python -m research.evaluate --policies "$out/$new" "$shipped" "$ref=examples/pretrained/p_s.zip" h-d h-a \
+  python -m research.evaluate --policies "$candidate" "$shipped" "$ref=examples/pretrained/p_s.zip" h-d h-a \
       "${grid[@]}" --summarize-only
   python -m shelf_env.evaluation.report "$out/closed_safe" --learned $new --heuristics h-d h-a
   python -m shelf_env.evaluation.compare "$out/closed_safe" --pair $new $old --pair $new $ref --pair $new h-d \
@@ -68,5 +69,5 @@ if [[ $step == closed || $step == all ]]; then
 fi
 if [[ $step == falls || $step == all ]]; then
   # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
-  python -m shelf_env.evaluation.falls "$out/$new" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
+  python -m shelf_env.evaluation.falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
 fi
