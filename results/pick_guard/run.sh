@@ -6,6 +6,7 @@
 # Usage: bash results/pick_guard/run.sh [val|open|closed|falls|all]   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
+. results/heldout.sh
 out=results/pick_guard
 geo=results/fall_geometry/filter/p_s_geo10.zip  # the shipped p_s.zip + its geometry risk, the label they were played as
 shipped="$geo+geometry-filter+loop-breaker"
@@ -24,25 +25,12 @@ if [[ $step == val || $step == all ]]; then
 fi
 if [[ $step == open || $step == all ]]; then
   # 2. held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
-  grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out "$out/open")
-  python -m research.evaluate --policies "$candidate" "${grid[@]}" --workers "${WORKERS:-1}"
-  python -m research.evaluate --policies "$shipped" "${others[@]}" "${grid[@]}" --reuse-cells results/models_v4/open
-  python -m research.evaluate --policies "$candidate" "$shipped" "${others[@]}" "${grid[@]}" --summarize-only
-  python -m shelf_env.evaluation.report "$out/open" --learned $new --pick-only s --heuristics h-d h-a
-  python -m shelf_env.evaluation.compare "$out/open" --pair $new $old --pair $new $ref --pair $new h-d \
-      --pair $new h-a --out "$out/open/paired.md"
+  heldout_open $out "$candidate" $new $old $ref results/models_v4/open "$shipped" "${others[@]}"
 fi
 if [[ $step == closed || $step == all ]]; then
   # 3. held-out, closed loop + safe picks: seed 0, N = 3..14
-  grid=(--ns 3-14 --runs 30 --seeds 1 --object-sets ycb --closed-loop '{}' --safe-picks --out "$out/closed_safe")
-  python -m research.evaluate --policies "$candidate" "${grid[@]}" --workers "${WORKERS:-1}"
-  python -m research.evaluate --policies "$shipped" "$ref=examples/pretrained/p_s.zip" h-d h-a "${grid[@]}" \
-      --reuse-cells results/models_v4/closed_safe
-  python -m research.evaluate --policies "$candidate" "$shipped" "$ref=examples/pretrained/p_s.zip" h-d h-a \
-      "${grid[@]}" --summarize-only
-  python -m shelf_env.evaluation.report "$out/closed_safe" --learned $new --heuristics h-d h-a
-  python -m shelf_env.evaluation.compare "$out/closed_safe" --pair $new $old --pair $new $ref --pair $new h-d \
-      --pair $new h-a --out "$out/closed_safe/paired.md"
+  heldout_closed $out "$candidate" $new $old $ref results/models_v4/closed_safe "$shipped" \
+      "$ref=examples/pretrained/p_s.zip" h-d h-a
 fi
 if [[ $step == falls || $step == all ]]; then
   # 4. the guarded policy's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
