@@ -6,7 +6,9 @@
 # and digest) from results/stricter_filter/val90.
 # Then (added after the validation, as the plan says) the candidate that passed it, A, on issue 10's held-out scenes:
 # the open-loop grid, then closed loop + safe picks, every other policy's cells copied from results/pick_guard.
-# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|all]   (WORKERS=2 for two processes)
+# The twenty-first session: candidate C, A fine-tuned for 2 epochs on every shard complete at its start, on the same
+# validation scenes (the other policies' cells are already in val90): steps c and valc.
+# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|all]   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 . results/heldout.sh
@@ -32,6 +34,22 @@ if [[ $step == b || $step == all ]]; then
       --max-shards "$S05" --init examples/pretrained/p_s.zip --out "$out/$b.zip" --epochs 8 --val-fraction 0.2 \
       --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 4 2>&1 | tee "$out/$b.log"
   cp -p "$risk" "$out/$b.geometry_risk.pt"
+fi
+c=p_s_all772  # candidate C
+SC=s00:55,s01:50,s02:205,s03:246,s04:172,s05:44  # every shard complete when C's run started (twenty-first session)
+if [[ $step == c || $step == all ]]; then
+  [ -f "$out/$c.zip" ] || OMP_NUM_THREADS=2 python -m shelf_env.training.distill --data data/teacher \
+      --max-shards "$SC" --init "$out/$a.zip" --out "$out/$c.zip" --epochs 2 --val-fraction 0.2 \
+      --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 2 \
+      --resume-file "$out/$c.resume.pt" 2>&1 | tee -a "$out/$c.log"
+  cp -p "$risk" "$out/$c.geometry_risk.pt"
+fi
+if [[ $step == valc || $step == all ]]; then
+  python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 \
+      --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90"
+  for m in $old $a$wrap; do
+    python -m shelf_env.evaluation.compare "$out/val90" --pair "$c$wrap" "$m" --out "$out/val90_pairs_${c}_vs_${m%%+*}.md"
+  done
 fi
 if [[ $step == val || $step == all ]]; then
   # validation: seeds 2000-2002, N = 5, 8, 11
