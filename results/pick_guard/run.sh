@@ -25,11 +25,11 @@ if [[ $step == val || $step == all ]]; then
 fi
 if [[ $step == open || $step == all ]]; then
   # 2. held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
-  heldout_open $out "$candidate" $new $old $ref results/models_v4/open "$shipped" "${others[@]}"
+  heldout open $out "$candidate" $new $old $ref results/models_v4/open "$shipped" "${others[@]}"
 fi
 if [[ $step == closed || $step == all ]]; then
   # 3. held-out, closed loop + safe picks: seed 0, N = 3..14
-  heldout_closed $out "$candidate" $new $old $ref results/models_v4/closed_safe "$shipped" \
+  heldout closed $out "$candidate" $new $old $ref results/models_v4/closed_safe "$shipped" \
       "$ref=examples/pretrained/p_s.zip" h-d h-a
 fi
 if [[ $step == falls || $step == all ]]; then
