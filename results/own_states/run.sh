@@ -8,7 +8,7 @@
 # the open-loop grid, then closed loop + safe picks, every other policy's cells copied from results/pick_guard.
 # The twenty-first session: candidate C, A fine-tuned for 2 epochs on every shard complete at its start, on the same
 # validation scenes (the other policies' cells are already in val90): steps c and valc.
-# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|all]   (WORKERS=2 for two processes)
+# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|all|openc|closedc|fallsc]   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 . results/heldout.sh
@@ -66,14 +66,30 @@ ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results
 others=("$ref=examples/pretrained/p_s.zip" examples/pretrained/s.zip h-d h-a)
 if [[ $step == open || $step == all ]]; then
   # held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
-  heldout_open $out "$candidate" $new $old $ref results/pick_guard/open "$shipped" "${others[@]}"
+  heldout open $out "$candidate" $new $old $ref results/pick_guard/open "$shipped" "${others[@]}"
 fi
 if [[ $step == closed || $step == all ]]; then
   # held-out, closed loop + safe picks: seed 0, N = 3..14
-  heldout_closed $out "$candidate" $new $old $ref results/pick_guard/closed_safe "$shipped" \
+  heldout closed $out "$candidate" $new $old $ref results/pick_guard/closed_safe "$shipped" \
       "$ref=examples/pretrained/p_s.zip" h-d h-a
 fi
 if [[ $step == falls || $step == all ]]; then
   # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
   python -m shelf_env.evaluation.falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
+fi
+# Candidate C on the held-out scenes, only where it passed validation (the page's rule; not part of "all"): its own
+# folder c/, every other policy's cells (A's too) copied from this folder's open/ and closed_safe/; C against A too
+cdir=$out/c
+if [[ $step == openc ]]; then
+  heldout open $cdir "$out/$c.zip$wrap" $c$wrap $old $ref $out/open "$shipped" "$out/$a.zip$wrap" "${others[@]}"
+  python -m shelf_env.evaluation.compare $cdir/open --pair $c$wrap $a$wrap --out $cdir/open/paired_a.md
+fi
+if [[ $step == closedc ]]; then
+  heldout closed $cdir "$out/$c.zip$wrap" $c$wrap $old $ref $out/closed_safe "$shipped" "$out/$a.zip$wrap" \
+      "$ref=examples/pretrained/p_s.zip" h-d h-a
+  python -m shelf_env.evaluation.compare $cdir/closed_safe --pair $c$wrap $a$wrap --out $cdir/closed_safe/paired_a.md
+fi
+if [[ $step == fallsc ]]; then
+  mkdir -p $cdir
+  python -m shelf_env.evaluation.falls "$out/$c.zip$wrap" --ns 8 --runs 30 --seed 0 --out "$cdir/falls30.json"
 fi
