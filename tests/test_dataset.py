@@ -421,3 +421,24 @@ def test_a_soup_of_distilled_models_and_their_validation_losses(one_shard: pathl
         assert rows[str(model)]["loss"] == pytest.approx(own["loss"], abs=1e-4)
     assert np.isfinite(rows[str(soup)]["loss"]) and rows[str(soup)]["loss"] != rows[str(models[0])]["loss"]
     assert json.loads((tmp_path / "soup.soup.json").read_text())["ingredients"][1]["path"] == str(models[1])
+
+
+def test_series_table_counts_pushes_and_the_teacher_s_share_per_series(one_shard: pathlib.Path,
+                                                                          tmp_path: pathlib.Path) -> None:
+    from research.series_actions import series_table
+
+    with np.load(dataset.shard_path(one_shard, 0, 0)) as data:
+        arrays = {k: data[k] for k in data.files}
+    cells = int(np.prod(arrays["obs"].shape[2:]))
+    n = len(arrays["teacher_action"])
+    picks = arrays["teacher_action"] % cells  # the same cells, on the pick map
+    # series 0: the teacher picks and is executed; series 5: the teacher picks, a push is executed instead
+    np.savez_compressed(tmp_path / "s00_00000.npz", **{**arrays, "teacher_action": picks, "executed_action": picks})
+    np.savez_compressed(tmp_path / "s05_00000.npz",
+                        **{**arrays, "teacher_action": picks, "executed_action": picks + cells})
+    rows = {line.split(" | ")[0].strip("| "): line.split(" | ")[1:] for line in series_table(tmp_path).splitlines()[2:]}
+    assert set(rows) == {"s00", "s05"}
+    assert rows["s00"][:4] == [str(n), "0.0 %", "0.0 %", "100.0 %"]
+    assert rows["s05"][:4] == [str(n), "0.0 %", "100.0 %", "0.0 %"]
+    with pytest.raises(ValueError, match="no dataset shards"):
+        series_table(tmp_path / "empty")

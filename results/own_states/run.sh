@@ -8,7 +8,7 @@
 # the open-loop grid, then closed loop + safe picks, every other policy's cells copied from results/pick_guard.
 # The twenty-first session: candidate C, A fine-tuned for 2 epochs on every shard complete at its start, on the same
 # validation scenes (the other policies' cells are already in val90): steps c and valc.
-# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|all|openc|closedc|fallsc]   (WORKERS=2 for two processes)
+# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|all|openc|closedc|fallsc|series]   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 . results/heldout.sh
@@ -92,4 +92,8 @@ fi
 if [[ $step == fallsc ]]; then
   mkdir -p $cdir
   python -m shelf_env.evaluation.falls "$out/$c.zip$wrap" --ns 8 --runs 30 --seed 0 --out "$cdir/falls30.json"
+fi
+if [[ $step == series || $step == all ]]; then
+  # what each shard series holds: the teacher's and the executed actions' primitives, the driver's greedy falls
+  python -m research.series_actions data/teacher --out $out/series_actions.md
 fi
