@@ -18,6 +18,7 @@ import sys
 
 import numpy as np
 
+from shelf_env.files import write_text_atomically
 from shelf_env.privileged import dataset
 
 
@@ -26,11 +27,13 @@ def series_table(folder: pathlib.Path) -> str:
     greedy = dataset.SOURCES.index("greedy")
     rows: dict[str, np.ndarray] = {}
     for path in dataset.shard_files(folder):
-        arrays = dataset.load_shard(path).arrays
+        shard = dataset.load_shard(path)
+        arrays = shard.arrays
         cells = int(np.prod(arrays["obs"].shape[2:]))
+        pick = list(shard.meta["layout"]["map_names"]).index("pick")  # every other map is a push
         teacher, executed = arrays["teacher_action"], arrays["executed_action"]
         probed = arrays["label_source"] == greedy
-        counts = np.array([len(teacher), (teacher >= cells).sum(), (executed >= cells).sum(),
+        counts = np.array([len(teacher), (teacher // cells != pick).sum(), (executed // cells != pick).sum(),
                            (teacher == executed).sum(), probed.sum(), arrays["label_fell"][probed].sum()], float)
         series = path.name[:3]
         rows[series] = rows.get(series, np.zeros(6)) + counts
@@ -58,9 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.out is None:
         print(table, end="")
     else:
-        tmp = args.out.with_suffix(args.out.suffix + ".tmp")
-        tmp.write_text(table)
-        tmp.replace(args.out)
+        write_text_atomically(args.out, table)
     return 0
 
 

@@ -8,7 +8,8 @@
 # the open-loop grid, then closed loop + safe picks, every other policy's cells copied from results/pick_guard.
 # The twenty-first session: candidate C, A fine-tuned for 2 epochs on every shard complete at its start, on the same
 # validation scenes (the other policies' cells are already in val90): steps c and valc.
-# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|all|openc|closedc|fallsc|series]   (WORKERS=2 for two processes)
+# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|all|openc|closedc|fallsc|series]
+#   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 . results/heldout.sh
@@ -45,8 +46,8 @@ if [[ $step == c || $step == all ]]; then
   cp -p "$risk" "$out/$c.geometry_risk.pt"
 fi
 if [[ $step == valc || $step == all ]]; then
-  python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 \
-      --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90"
+  python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
+      --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90"
   for m in $old $a$wrap; do
     python -m shelf_env.evaluation.compare "$out/val90" --pair "$c$wrap" "$m" --out "$out/val90_pairs_${c}_vs_${m%%+*}.md"
   done
