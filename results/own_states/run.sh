@@ -8,7 +8,9 @@
 # the open-loop grid, then closed loop + safe picks, every other policy's cells copied from results/pick_guard.
 # The twenty-first session: candidate C, A fine-tuned for 2 epochs on every shard complete at its start, on the same
 # validation scenes (the other policies' cells are already in val90): steps c and valc.
-# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|all|openc|closedc|fallsc|series]
+# The twenty-second session: candidate D, C without series 5 (steps d and vald).
+# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|d|vald|all|openc|closedc|fallsc|
+#   opend|closedd|fallsd|series]
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -78,22 +80,49 @@ if [[ $step == falls || $step == all ]]; then
   # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
   python -m shelf_env.evaluation.falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
 fi
-# Candidate C on the held-out scenes, only where it passed validation (the page's rule; not part of "all"): its own
-# folder c/, every other policy's cells (A's too) copied from this folder's open/ and closed_safe/; C against A too
-cdir=$out/c
-if [[ $step == openc ]]; then
-  heldout open $cdir "$out/$c.zip$wrap" $c$wrap $old $ref $out/open "$shipped" "$out/$a.zip$wrap" "${others[@]}"
-  python -m shelf_env.evaluation.compare $cdir/open --pair $c$wrap $a$wrap --out $cdir/open/paired_a.md
+# Candidates C and D on the held-out scenes, only where they passed validation (the page's rules; not part of
+# "all"): each in its own folder ($out/c, $out/d), every other policy's cells (A's too) copied from this folder's
+# open/ and closed_safe/; the candidate against A too.
+held() {  # held open|closed|falls NAME DIR
+  local mode=$1 m=$2 dir=$3
+  case $mode in
+    open)
+      heldout open "$dir" "$out/$m.zip$wrap" "$m$wrap" $old $ref $out/open "$shipped" "$out/$a.zip$wrap" "${others[@]}"
+      python -m shelf_env.evaluation.compare "$dir/open" --pair "$m$wrap" $a$wrap --out "$dir/open/paired_a.md" ;;
+    closed)
+      heldout closed "$dir" "$out/$m.zip$wrap" "$m$wrap" $old $ref $out/closed_safe "$shipped" "$out/$a.zip$wrap" \
+          "$ref=examples/pretrained/p_s.zip" h-d h-a
+      python -m shelf_env.evaluation.compare "$dir/closed_safe" --pair "$m$wrap" $a$wrap \
+          --out "$dir/closed_safe/paired_a.md" ;;
+    falls)
+      mkdir -p "$dir"
+      python -m shelf_env.evaluation.falls "$out/$m.zip$wrap" --ns 8 --runs 30 --seed 0 --out "$dir/falls30.json" ;;
+  esac
+}
+d=p_s_all_s0to4  # candidate D: C's recipe and shards without series 5 (the twenty-second session)
+SD=s00:55,s01:50,s02:205,s03:246,s04:172
+if [[ $step == d ]]; then
+  [ -f "$out/$d.zip" ] || OMP_NUM_THREADS=2 python -m shelf_env.training.distill --data data/teacher \
+      --max-shards "$SD" --init "$out/$a.zip" --out "$out/$d.zip" --epochs 2 --val-fraction 0.2 \
+      --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 2 \
+      --resume-file "$out/$d.resume.pt" 2>&1 | tee -a "$out/$d.log"
+  cp -p "$risk" "$out/$d.geometry_risk.pt"
 fi
-if [[ $step == closedc ]]; then
-  heldout closed $cdir "$out/$c.zip$wrap" $c$wrap $old $ref $out/closed_safe "$shipped" "$out/$a.zip$wrap" \
-      "$ref=examples/pretrained/p_s.zip" h-d h-a
-  python -m shelf_env.evaluation.compare $cdir/closed_safe --pair $c$wrap $a$wrap --out $cdir/closed_safe/paired_a.md
+if [[ $step == vald ]]; then
+  python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
+      "$out/$d.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
+      --workers "${WORKERS:-1}" --out "$out/val90"
+  for m in $old $a$wrap $c$wrap; do
+    python -m shelf_env.evaluation.compare "$out/val90" --pair "$d$wrap" "$m" --out "$out/val90_pairs_${d}_vs_${m%%+*}.md"
+  done
 fi
-if [[ $step == fallsc ]]; then
-  mkdir -p $cdir
-  python -m shelf_env.evaluation.falls "$out/$c.zip$wrap" --ns 8 --runs 30 --seed 0 --out "$cdir/falls30.json"
-fi
+for x in c d; do
+  for mode in open closed falls; do
+    if [[ $step == "$mode$x" ]]; then
+      held $mode "${!x}" "$out/$x"
+    fi
+  done
+done
 if [[ $step == series || $step == all ]]; then
   # what each shard series holds: the teacher's and the executed actions' primitives, the driver's greedy falls
   python -m research.series_actions data/teacher --out $out/series_actions.md
