@@ -442,39 +442,3 @@ def test_series_table_counts_pushes_and_the_teacher_s_share_per_series(one_shard
     assert rows["s05"][:4] == [str(n), "0.0 %", "100.0 %", "0.0 %"]
     with pytest.raises(ValueError, match="no dataset shards"):
         series_table(tmp_path / "empty")
-
-
-def test_a_teacher_that_skips_its_picks_images_collects_the_same_episode(monkeypatch: pytest.MonkeyPatch) -> None:
-    """`collect_episode`'s teacher probes its picks without the copy's camera (`observe_picks` False): the same
-    states, decisions and labels as a teacher that renders them, bit for bit, on one machine."""
-    import gymnasium as gym
-
-    from shelf_env.actions import PRIMITIVES
-    from shelf_env.privileged import lookahead
-
-    rendering = {True: 0, False: 0}  # the rendered probes (`probe_step`) of each kind of teacher
-    step = lookahead.probe_step
-
-    def counted(env: gym.Env, action: int) -> lookahead.Outcome:
-        rendering[observes] += 1
-        return step(env, action)
-
-    monkeypatch.setattr(lookahead, "probe_step", counted)
-    episodes = []
-    for observes in (True, False):
-        env = gym.make("ShelfSort-v0", num_objects=4, object_set="train", primitives=PRIMITIVES,
-                       pixel_size=dataset.PIXEL_SIZE)
-        try:
-            seed = dataset.scene_seed(9, 0, 0)
-            episodes.append(dataset.collect_episode(env, None, seed, np.random.default_rng(seed), max_probes=6,
-                                                    teacher_observes=observes))
-        finally:
-            env.close()
-    rendered, blind = episodes
-    assert len(rendered.obs) >= 2 and rendered.actions == blind.actions
-    assert all(np.array_equal(a, b) for a, b in zip(rendered.obs, blind.obs, strict=True))
-    assert rendered.states == blind.states
-    assert rendered.labels == blind.labels
-    teacher_labels = [s == dataset.SOURCES.index("teacher") for s in blind.labels["label_source"]]
-    assert any(teacher_labels)  # the teacher's own (pick) probes are among the labels compared
-    assert rendering[True] >= len(rendered.obs) and rendering[False] < rendering[True]

@@ -137,21 +137,17 @@ TEACHERS = ("h-d-lookahead", "h-d-planner")
 
 
 def collect_episode(env: gym.Env, model: Any, seed: int, rng: np.random.Generator, explore: float = 0.3,
-                    max_probes: int = 24, teacher_name: str = "h-d-lookahead",
-                    teacher_observes: bool = False) -> Episode:
+                    max_probes: int = 24, teacher_name: str = "h-d-lookahead") -> Episode:
     """Play the scene of ``seed`` with the teacher and label every visited state (module docstring).
     ``model``: anything with SB3's ``predict(obs, deterministic, action_masks)``, whose greedy action is
     labelled first and sometimes executed; None for the teacher alone. It is asked as an evaluation asks
     (`shelf_env.evaluation.protocol.greedy_action`: the env's masks, and SB3's ``episode_start`` at the first
     state where its ``predict`` takes it), so a policy under wrappers with memory (the loop breaker, the pick
-    guard) drives as it plays. ``teacher_observes``: the teacher's pick probes render the copy's camera
-    (`LookaheadHeuristic.observe_picks`), as the collections before this option did; the
-    same episode and labels at more cost (``benchmarks/collect_cost.py``)."""
+    guard) drives as it plays."""
     base: Any = env.unwrapped
     if teacher_name not in TEACHERS:
         raise ValueError(f"unknown teacher {teacher_name!r}; known: {list(TEACHERS)}")
     teacher: LookaheadHeuristic = POLICIES[teacher_name](env, 0)
-    teacher.observe_picks = teacher_observes  # its picks' outcomes are what the labels keep, not their images
     episode = Episode()
     masked = model is not None and takes_action_masks(model)
     starts = model is not None and predict_takes(model, "episode_start")

@@ -155,13 +155,7 @@ def probe_outcome(env: gym.Env, action: int) -> Outcome:
 class LookaheadHeuristic(PickHeuristic):
     """A pick heuristic (``base``: H-a or H-d) that vetoes picks the simulator says end the episode
     invalid (see the module docstring); with ``pushes`` (and the env's push primitive) a step where
-    every pick is invalid tries pushes before giving up. ``stats`` counts them (`STAT_KEYS`).
-
-    ``observe_picks`` (default True): whether a pick's probe renders the copy's next observation
-    (`probe_step`) or only steps it (`probe_outcome`, about 0.6x the cost). The decisions are the same
-    either way, since a pick's probe is read for its outcome alone (a push's also for whether the image
-    changed, so pushes always render); with False, `counterfactuals` holds no picks. The teacher
-    dataset's collection sets it False (`shelf_env.privileged.dataset.collect_episode`)."""
+    every pick is invalid tries pushes before giving up. ``stats`` counts them (`STAT_KEYS`)."""
 
     def __init__(self, env: gym.Env, base: type[PickHeuristic] = AccessibilityHeuristic,
                  max_probes: int | None = None, pushes: bool = True) -> None:
@@ -173,7 +167,6 @@ class LookaheadHeuristic(PickHeuristic):
         self.max_probes = max_probes
         self.pushes = pushes
         self.stats = dict.fromkeys(STAT_KEYS, 0)
-        self.observe_picks = True  # False: pick probes skip the copy's camera (see the class docstring)
         self._probed: list[tuple[int, Outcome]] = []  # the last decision's probes
         self._taken: int | None = None  # and its action
 
@@ -198,10 +191,7 @@ class LookaheadHeuristic(PickHeuristic):
 
     def _probe(self, action: int) -> Outcome:
         self.stats["probes"] += 1
-        if self.observe_picks or self.codec.decode(action)[0] != "pick":
-            outcome = probe_step(self.env, action)
-        else:  # a pick's probe is read for its outcome alone: the copy may skip its camera
-            outcome = probe_outcome(self.env, action)
+        outcome = probe_step(self.env, action)
         self._probed.append((action, outcome))
         return outcome
 
