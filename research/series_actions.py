@@ -33,7 +33,8 @@ def series_table(folder: pathlib.Path) -> str:
         pick = list(shard.meta["layout"]["map_names"]).index("pick")  # every other map is a push
         teacher, executed = arrays["teacher_action"], arrays["executed_action"]
         probed = arrays["label_source"] == greedy
-        counts = np.array([len(teacher), (teacher // cells != pick).sum(), (executed // cells != pick).sum(),
+        pushed = (executed >= 0) & (executed // cells != pick)  # -1: nothing was executed (no valid action)
+        counts = np.array([len(teacher), (teacher // cells != pick).sum(), pushed.sum(),
                            (teacher == executed).sum(), probed.sum(), arrays["label_fell"][probed].sum()], float)
         series = path.name[:3]
         rows[series] = rows.get(series, np.zeros(6)) + counts

@@ -38,14 +38,18 @@ if [[ $step == b || $step == all ]]; then
       --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 4 2>&1 | tee "$out/$b.log"
   cp -p "$risk" "$out/$b.geometry_risk.pt"
 fi
+finetune() {  # finetune NAME SHARDS: A's weights trained 2 more epochs on SHARDS (--max-shards), the mean of both
+  local m=$1 shards=$2
+  [ -f "$out/$m.zip" ] || OMP_NUM_THREADS=2 python -m shelf_env.training.distill --data data/teacher \
+      --max-shards "$shards" --init "$out/$a.zip" --out "$out/$m.zip" --epochs 2 --val-fraction 0.2 \
+      --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 2 \
+      --resume-file "$out/$m.resume.pt" 2>&1 | tee -a "$out/$m.log"
+  cp -p "$risk" "$out/$m.geometry_risk.pt"
+}
 c=p_s_all772  # candidate C
 SC=s00:55,s01:50,s02:205,s03:246,s04:172,s05:44  # every shard complete when C's run started (twenty-first session)
 if [[ $step == c || $step == all ]]; then
-  [ -f "$out/$c.zip" ] || OMP_NUM_THREADS=2 python -m shelf_env.training.distill --data data/teacher \
-      --max-shards "$SC" --init "$out/$a.zip" --out "$out/$c.zip" --epochs 2 --val-fraction 0.2 \
-      --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 2 \
-      --resume-file "$out/$c.resume.pt" 2>&1 | tee -a "$out/$c.log"
-  cp -p "$risk" "$out/$c.geometry_risk.pt"
+  finetune $c "$SC"
 fi
 if [[ $step == valc || $step == all ]]; then
   python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
@@ -102,11 +106,7 @@ held() {  # held open|closed|falls NAME DIR
 d=p_s_all_s0to4  # candidate D: C's recipe and shards without series 5 (the twenty-second session)
 SD=s00:55,s01:50,s02:205,s03:246,s04:172
 if [[ $step == d ]]; then
-  [ -f "$out/$d.zip" ] || OMP_NUM_THREADS=2 python -m shelf_env.training.distill --data data/teacher \
-      --max-shards "$SD" --init "$out/$a.zip" --out "$out/$d.zip" --epochs 2 --val-fraction 0.2 \
-      --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 2 \
-      --resume-file "$out/$d.resume.pt" 2>&1 | tee -a "$out/$d.log"
-  cp -p "$risk" "$out/$d.geometry_risk.pt"
+  finetune $d "$SD"
 fi
 if [[ $step == vald ]]; then
   python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
