@@ -111,6 +111,13 @@ def test_collection_resumes_without_redoing_shards(one_shard: pathlib.Path, tmp_
     assert [p.name for p in dataset.shard_files(out)] == ["s00_00000.npz", "s00_00001.npz"]
     text = dataset.status(out)
     assert "2 shards, 2 scenes" in text and "| 2 | 2 |" in text
+    states = sum(dataset.load_shard(p).num_states for p in dataset.shard_files(out))
+    assert f"| s00 | 2 | {states} |" in text
+    assert text.splitlines()[-1] == "all of it, named for a reproducible run: --max-shards s00:2"
+    (out / "s00_00001.npz").rename(out / "s01_00001.npz")  # series 1 without its shard 0
+    text = dataset.status(out)
+    assert "--max-shards s00:1,s01:1" in text
+    assert text.splitlines()[-1].endswith("until it is collected): s01")
 
 
 def test_a_collection_killed_mid_shard_leaves_nothing(tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> None:

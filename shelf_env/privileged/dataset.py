@@ -516,12 +516,20 @@ def _collect_worker(kwargs: dict[str, Any]) -> int:
 
 
 def status(folder: pathlib.Path) -> str:
-    """What the dataset holds: states, labels and scenes per N, label outcomes, and the collection's throughput."""
+    """What the dataset holds: states, labels and scenes per N and per series, label outcomes, the collection's
+    throughput, and the ``--max-shards`` spec that names today's dataset for a run that must stay reproducible
+    while the dataset grows (`shelf_env.training.distill.select_shards`)."""
     shards = load_dataset(folder)
     per_n: dict[int, list[int]] = {}
+    per_series: dict[str, list[int]] = {}
     seconds = 0.0
     for s in shards:
         seconds += float(s.meta["seconds"])
+        row_s = per_series.setdefault(s.path.name.partition("_")[0], [0, 0, 0, 0])
+        row_s[0] += 1
+        row_s[1] += s.num_states
+        row_s[2] += s.num_labels
+        row_s[3] = max(row_s[3], int(s.path.stem.partition("_")[2]) + 1)  # shards 0..k-1 unless one is missing
         episode_n = np.array([e["num_objects"] for e in s.meta["episodes"]])
         n_of_state = episode_n[s.arrays["state_episode"]]
         n_of_label = n_of_state[s.arrays["label_state"]]
@@ -540,6 +548,13 @@ def status(folder: pathlib.Path) -> str:
              f"and {labels / max(seconds, 1e-9) * 3600:.0f} labels per worker-hour",
              "| N | scenes | states | labels | invalid labels |", "|---|---|---|---|---|"]
     lines += [f"| {n} | {r[0]} | {r[1]} | {r[2]} | {r[3] / max(r[2], 1):.1%} |" for n, r in sorted(per_n.items())]
+    lines += ["", "| series | shards | states | labels |", "|---|---|---|---|"]
+    lines += [f"| {name} | {r[0]} | {r[1]} | {r[2]} |" for name, r in sorted(per_series.items())]
+    lines.append("all of it, named for a reproducible run: --max-shards "
+                 + ",".join(f"{name}:{r[0]}" for name, r in sorted(per_series.items())))
+    gaps = [name for name, r in sorted(per_series.items()) if r[3] != r[0]]
+    if gaps:  # a collection fills a missing shard first, so the first k of such a series can change
+        lines.append(f"series with a missing shard (the spec names them only until it is collected): {', '.join(gaps)}")
     return "\n".join(lines)
 
 
