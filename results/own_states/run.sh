@@ -51,21 +51,39 @@ SC=s00:55,s01:50,s02:205,s03:246,s04:172,s05:44  # every shard complete when C's
 if [[ $step == c || $step == all ]]; then
   finetune $c "$SC"
 fi
-if [[ $step == valc || $step == all ]]; then
-  python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
-      --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90"
-  for m in $old $a$wrap; do
-    python -m shelf_env.evaluation.compare "$out/val90" --pair "$c$wrap" "$m" --out "$out/val90_pairs_${c}_vs_${m%%+*}.md"
-  done
+d=p_s_all_s0to4  # candidate D: C's recipe and shards without series 5 (the twenty-second session)
+SD=s00:55,s01:50,s02:205,s03:246,s04:172
+if [[ $step == d || $step == all ]]; then
+  finetune $d "$SD"
 fi
+# Validation: seeds 2000-2002, N = 5, 8, 11. Every step evaluates every candidate made so far in one list (cells
+# already played are kept, the shipped policy's copied from results/stricter_filter/val90), so that val90's summary
+# holds them all whichever step ran last; each step then writes its own candidate's pairs.
+validate() {
+  python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
+      "$out/$d.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
+      --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/stricter_filter/val90
+}
+pairs() {  # pairs NAME OUT_PREFIX AGAINST...: NAME (wrapped) against each label on the validation scenes
+  local m=$1 prefix=$2
+  shift 2
+  for o in "$@"; do
+    python -m shelf_env.evaluation.compare "$out/val90" --pair "$m$wrap" "$o" --out "$out/${prefix}${o%%+*}.md"
+  done
+}
 if [[ $step == val || $step == all ]]; then
-  # validation: seeds 2000-2002, N = 5, 8, 11
-  python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" --ns 5,8,11 --seeds 3 \
-      --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" \
-      --reuse-cells results/stricter_filter/val90
+  validate
   for m in $a $b; do
     python -m shelf_env.evaluation.compare "$out/val90" --pair "$m$wrap" $old --out "$out/val90_pairs_$m.md"
   done
+fi
+if [[ $step == valc || $step == all ]]; then
+  validate
+  pairs $c "val90_pairs_${c}_vs_" $old $a$wrap
+fi
+if [[ $step == vald || $step == all ]]; then
+  validate
+  pairs $d "val90_pairs_${d}_vs_" $old $a$wrap $c$wrap
 fi
 candidate="$out/$a.zip$wrap"  # the candidate that passed validation
 new=$a$wrap  # its cells' label
@@ -103,19 +121,6 @@ held() {  # held open|closed|falls NAME DIR
       python -m shelf_env.evaluation.falls "$out/$m.zip$wrap" --ns 8 --runs 30 --seed 0 --out "$dir/falls30.json" ;;
   esac
 }
-d=p_s_all_s0to4  # candidate D: C's recipe and shards without series 5 (the twenty-second session)
-SD=s00:55,s01:50,s02:205,s03:246,s04:172
-if [[ $step == d ]]; then
-  finetune $d "$SD"
-fi
-if [[ $step == vald ]]; then
-  python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
-      "$out/$d.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
-      --workers "${WORKERS:-1}" --out "$out/val90"
-  for m in $old $a$wrap $c$wrap; do
-    python -m shelf_env.evaluation.compare "$out/val90" --pair "$d$wrap" "$m" --out "$out/val90_pairs_${d}_vs_${m%%+*}.md"
-  done
-fi
 for x in c d; do
   for mode in open closed falls; do
     if [[ $step == "$mode$x" ]]; then
