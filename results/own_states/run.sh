@@ -56,34 +56,31 @@ SD=s00:55,s01:50,s02:205,s03:246,s04:172
 if [[ $step == d || $step == all ]]; then
   finetune $d "$SD"
 fi
-# Validation: seeds 2000-2002, N = 5, 8, 11. Every step evaluates every candidate made so far in one list (cells
-# already played are kept, the shipped policy's copied from results/stricter_filter/val90), so that val90's summary
-# holds them all whichever step ran last; each step then writes its own candidate's pairs.
-validate() {
+# Validation: seeds 2000-2002, N = 5, 8, 11. Each validation step (and all, once) evaluates every candidate in one
+# list (cells already played are kept, the shipped policy's copied from results/stricter_filter/val90), so that
+# val90's summary holds them all whichever step ran last; each step then writes its own candidate's pairs.
+if [[ $step == val || $step == valc || $step == vald || $step == all ]]; then
   python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
       "$out/$d.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
       --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/stricter_filter/val90
-}
-pairs() {  # pairs NAME OUT_PREFIX AGAINST...: NAME (wrapped) against each label on the validation scenes
-  local m=$1 prefix=$2
-  shift 2
+fi
+pairs() {  # pairs NAME AGAINST...: NAME (wrapped) against each label on the validation scenes
+  local m=$1
+  shift
   for o in "$@"; do
-    python -m shelf_env.evaluation.compare "$out/val90" --pair "$m$wrap" "$o" --out "$out/${prefix}${o%%+*}.md"
+    python -m shelf_env.evaluation.compare "$out/val90" --pair "$m$wrap" "$o" --out "$out/val90_pairs_${m}_vs_${o%%+*}.md"
   done
 }
 if [[ $step == val || $step == all ]]; then
-  validate
   for m in $a $b; do
     python -m shelf_env.evaluation.compare "$out/val90" --pair "$m$wrap" $old --out "$out/val90_pairs_$m.md"
   done
 fi
 if [[ $step == valc || $step == all ]]; then
-  validate
-  pairs $c "val90_pairs_${c}_vs_" $old $a$wrap
+  pairs $c $old $a$wrap
 fi
 if [[ $step == vald || $step == all ]]; then
-  validate
-  pairs $d "val90_pairs_${d}_vs_" $old $a$wrap $c$wrap
+  pairs $d $old $a$wrap $c$wrap
 fi
 candidate="$out/$a.zip$wrap"  # the candidate that passed validation
 new=$a$wrap  # its cells' label
