@@ -70,7 +70,7 @@ def load_sets(data: pathlib.Path, val_fraction: float, max_shards: str | None, f
     ``val_fraction``), the scene of each validation state (the two-fold split of `twofold` keeps a scene's
     states together) and, with ``fresh``, the test set."""
     from shelf_env.privileged import dataset
-    from shelf_env.training.distill import select_shards
+    from shelf_env.privileged.dataset import select_shards
 
     if not 0 < val_fraction < 1:
         raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
@@ -91,7 +91,7 @@ def fresh_split(data: pathlib.Path, used: str | None, fresh: str) -> fall_risk.S
 
 
 def _fresh(shards: list[Any], used: str | None, fresh: str) -> fall_risk.Split:
-    from shelf_env.training.distill import select_shards
+    from shelf_env.privileged.dataset import select_shards
 
     taken = {s.path.name for s in select_shards(shards, used)}
     chosen = [s for s in select_shards(shards, fresh) if s.path.name not in taken]

@@ -89,7 +89,8 @@ def validation_losses(paths: Sequence[str | pathlib.Path], data: pathlib.Path, m
     from sb3_pixeldqn import PixelDoubleDQN
     from sb3_pixeldqn.distill import evaluate
     from shelf_env.privileged import dataset
-    from shelf_env.training.distill import select_shards, split_states
+    from shelf_env.privileged.dataset import select_shards
+    from shelf_env.training.distill import split_states
 
     val = split_states(select_shards(dataset.load_dataset(data), max_shards), val_fraction)[1]
     if val is None:

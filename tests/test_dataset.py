@@ -114,6 +114,15 @@ def test_collection_resumes_without_redoing_shards(one_shard: pathlib.Path, tmp_
     states = sum(dataset.load_shard(p).num_states for p in dataset.shard_files(out))
     assert f"| s00 | 2 | {states} |" in text
     assert text.splitlines()[-1] == "all of it, named for a reproducible run: --max-shards s00:2"
+    second = dataset.load_shard(out / "s00_00001.npz")
+    hours = float(second.meta["seconds"]) / 3600
+    since = dataset.status(out, since="s00:1")  # the second collection alone, with its own clock's rate
+    assert "since s00:1: 1 shards, 1 scenes" in since
+    assert (f"| s00 | 1 | {second.num_states} | {second.num_labels} | {hours:.2f} | "
+            f"{second.num_states / hours:.0f} / {second.num_labels / hours:.0f} |") in since
+    assert since.splitlines()[-1] == text.splitlines()[-1]  # the spec still names all of it
+    with pytest.raises(ValueError, match="--since asks for 3 shards of series s00"):
+        dataset.status(out, since="s00:3")
     (out / "s00_00001.npz").rename(out / "s01_00001.npz")  # series 1 without its shard 0
     text = dataset.status(out)
     assert "--max-shards s00:1,s01:1" in text
@@ -355,18 +364,16 @@ def test_each_shard_series_holds_out_its_own_last_scenes() -> None:
 
 
 def test_max_shards_names_a_growing_datasets_past_per_series() -> None:
-    from shelf_env.training.distill import select_shards
-
     shards = [dataset.Shard(pathlib.Path(f"s{k:02d}_{i:05d}.npz"), {}, {}) for k, i in
               ((0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (2, 0))]
-    names = [s.path.name[:9] for s in select_shards(shards, "s00:2,s01:1")]
+    names = [s.path.name[:9] for s in dataset.select_shards(shards, "s00:2,s01:1")]
     assert names == ["s00_00000", "s00_00001", "s01_00000"]
-    assert len(select_shards(shards, 4)) == len(select_shards(shards, "4")) == 4
-    assert select_shards(shards, None) == shards
+    assert len(dataset.select_shards(shards, 4)) == len(dataset.select_shards(shards, "4")) == 4
+    assert dataset.select_shards(shards, None) == shards
     with pytest.raises(ValueError, match="asks for 3 shards of series s01; the dataset holds 2"):
-        select_shards(shards, "s01:3")
+        dataset.select_shards(shards, "s01:3")
     with pytest.raises(ValueError, match="a number or"):
-        select_shards(shards, "first:3")
+        dataset.select_shards(shards, "first:3")
 
 
 def test_driver_progress_counts_the_greedy_and_teacher_labels_of_each_state(one_shard: pathlib.Path) -> None:

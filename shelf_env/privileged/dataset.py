@@ -515,21 +515,49 @@ def _collect_worker(kwargs: dict[str, Any]) -> int:
     return collect(**kwargs)
 
 
-def status(folder: pathlib.Path) -> str:
+def select_shards(shards: Sequence[Shard], spec: int | str | None, option: str = "--max-shards") -> list[Shard]:
+    """The shards a run uses, so that a growing dataset's past can be named: all (None), the first ``spec``
+    in name order (a number), or the first k of each series listed (``"s00:55,s01:9"``, as `status` prints it;
+    other series left out). A series listed with fewer shards than asked is refused; ``option`` names the
+    argument in that error."""
+    if spec is None:
+        return list(shards)
+    if isinstance(spec, int) or str(spec).isdigit():
+        return list(shards[:int(spec)])
+    wanted: dict[str, int] = {}
+    for part in str(spec).split(","):
+        name, _, digits = part.strip().partition(":")
+        if not (len(name) == 3 and name[0] == "s" and name[1:].isdigit() and digits.isdigit()):
+            raise ValueError(f"{option} takes a number or 's00:55,s01:9', got {spec!r}")
+        wanted[name] = int(digits)
+    out: list[Shard] = []
+    for name, count in wanted.items():
+        own = [s for s in shards if s.path.name.startswith(name + "_")][:count]
+        if len(own) < count:
+            raise ValueError(f"{option} asks for {count} shards of series {name}; the dataset holds {len(own)}")
+        out += own
+    return sorted(out, key=lambda s: s.path.name)
+
+
+def status(folder: pathlib.Path, since: str | None = None) -> str:
     """What the dataset holds: states, labels and scenes per N and per series, label outcomes, the collection's
-    throughput, and the ``--max-shards`` spec that names today's dataset for a run that must stay reproducible
-    while the dataset grows (`shelf_env.training.distill.select_shards`)."""
-    shards = load_dataset(folder)
+    throughput (per series from each shard's own clock), and the ``--max-shards`` spec that names today's dataset
+    for a run that must stay reproducible while the dataset grows (`select_shards`). ``since``: an earlier such
+    spec; the tables then count only the shards collected after it (a session's collection and its rates), while
+    the spec line still names all of it."""
+    every = load_dataset(folder)
+    before = {s.path.name for s in select_shards(every, since, "--since")} if since is not None else set()
+    shards = [s for s in every if s.path.name not in before]
     per_n: dict[int, list[int]] = {}
-    per_series: dict[str, list[int]] = {}
+    per_series: dict[str, list[float]] = {}
     seconds = 0.0
     for s in shards:
         seconds += float(s.meta["seconds"])
-        row_s = per_series.setdefault(s.path.name.partition("_")[0], [0, 0, 0, 0])
+        row_s = per_series.setdefault(s.path.name.partition("_")[0], [0, 0, 0, 0.0])
         row_s[0] += 1
         row_s[1] += s.num_states
         row_s[2] += s.num_labels
-        row_s[3] = max(row_s[3], int(s.path.stem.partition("_")[2]) + 1)  # shards 0..k-1 unless one is missing
+        row_s[3] += float(s.meta["seconds"])
         episode_n = np.array([e["num_objects"] for e in s.meta["episodes"]])
         n_of_state = episode_n[s.arrays["state_episode"]]
         n_of_label = n_of_state[s.arrays["label_state"]]
@@ -541,18 +569,31 @@ def status(folder: pathlib.Path) -> str:
             row[3] += int((~s.arrays["label_valid"][n_of_label == n]).sum())
     states = sum(s.num_states for s in shards)
     labels = sum(s.num_labels for s in shards)
-    lines = [f"dataset {folder}: {len(shards)} shards, {sum(r[0] for r in per_n.values())} scenes, {states} states, "
+
+    def per_hour(count: float, secs: float) -> str:
+        return f"{count / max(secs, 1e-9) * 3600:.0f}"
+
+    lines = [f"dataset {folder}{f' since {since}' if since is not None else ''}: {len(shards)} shards, "
+             f"{sum(r[0] for r in per_n.values())} scenes, {states} states, "
              f"{labels} labels ({labels / max(states, 1):.1f} per state), "
              f"{sum(r[3] for r in per_n.values()) / max(labels, 1):.1%} of labels invalid",
-             f"collection: {seconds / 3600:.2f} h of worker time, {states / max(seconds, 1e-9) * 3600:.0f} states "
-             f"and {labels / max(seconds, 1e-9) * 3600:.0f} labels per worker-hour",
+             f"collection: {seconds / 3600:.2f} h of worker time, {per_hour(states, seconds)} states "
+             f"and {per_hour(labels, seconds)} labels per worker-hour",
              "| N | scenes | states | labels | invalid labels |", "|---|---|---|---|---|"]
     lines += [f"| {n} | {r[0]} | {r[1]} | {r[2]} | {r[3] / max(r[2], 1):.1%} |" for n, r in sorted(per_n.items())]
-    lines += ["", "| series | shards | states | labels |", "|---|---|---|---|"]
-    lines += [f"| {name} | {r[0]} | {r[1]} | {r[2]} |" for name, r in sorted(per_series.items())]
+    lines += ["", "| series | shards | states | labels | worker-hours | states / labels per worker-hour |",
+              "|---|---|---|---|---|---|"]
+    lines += [f"| {name} | {r[0]:.0f} | {r[1]:.0f} | {r[2]:.0f} | {r[3] / 3600:.2f} | "
+              f"{per_hour(r[1], r[3])} / {per_hour(r[2], r[3])} |" for name, r in sorted(per_series.items())]
+    count: dict[str, int] = {}  # the spec and the gap check read the whole dataset, with or without since
+    last: dict[str, int] = {}
+    for s in every:
+        name, _, index = s.path.stem.partition("_")
+        count[name] = count.get(name, 0) + 1
+        last[name] = max(last.get(name, 0), int(index) + 1)  # shards 0..k-1 unless one is missing
     lines.append("all of it, named for a reproducible run: --max-shards "
-                 + ",".join(f"{name}:{r[0]}" for name, r in sorted(per_series.items())))
-    gaps = [name for name, r in sorted(per_series.items()) if r[3] != r[0]]
+                 + ",".join(f"{name}:{k}" for name, k in sorted(count.items())))
+    gaps = [name for name, k in sorted(count.items()) if last[name] != k]
     if gaps:  # a collection fills a missing shard first, so the first k of such a series can change
         lines.append(f"series with a missing shard (the spec names them only until it is collected): {', '.join(gaps)}")
     return "\n".join(lines)
@@ -585,10 +626,12 @@ def main(argv: list[str] | None = None) -> int:
     s = sub.add_parser("status", help="print what the dataset holds")
     s.add_argument("folder", type=pathlib.Path, nargs="?", default=pathlib.Path("data/teacher"),
                    help="the dataset folder")
+    s.add_argument("--since", default=None, help="count only the shards after these, a spec as the last line "
+                   "prints it (s03:436,s05:244): one session's collection and its throughput")
     args = parser.parse_args(argv)
     try:
         if args.command == "status":
-            print(status(args.folder))
+            print(status(args.folder, args.since))
             return 0
         if args.workers < 1:
             raise ValueError(f"--workers must be >= 1, got {args.workers}")

@@ -120,29 +120,6 @@ def split_states(shards: list[dataset.Shard], val_fraction: float, masks: bool =
     return labelled.subset(np.array(train_idx)), labelled.subset(np.array(val_idx)) if val_idx else None
 
 
-def select_shards(shards: list[dataset.Shard], spec: int | str | None) -> list[dataset.Shard]:
-    """The shards a run uses, so that a growing dataset's past can be named: all (None), the first ``spec``
-    in name order (a number), or the first k of each series listed (``"s00:55,s01:9"``; other series left
-    out). A series listed with fewer shards than asked is refused."""
-    if spec is None:
-        return shards
-    if isinstance(spec, int) or str(spec).isdigit():
-        return shards[:int(spec)]
-    wanted: dict[str, int] = {}
-    for part in str(spec).split(","):
-        name, _, digits = part.strip().partition(":")
-        if not (len(name) == 3 and name[0] == "s" and name[1:].isdigit() and digits.isdigit()):
-            raise ValueError(f"--max-shards takes a number or 's00:55,s01:9', got {spec!r}")
-        wanted[name] = int(digits)
-    out: list[dataset.Shard] = []
-    for name, count in wanted.items():
-        own = [s for s in shards if s.path.name.startswith(name + "_")][:count]
-        if len(own) < count:
-            raise ValueError(f"--max-shards asks for {count} shards of series {name}; the dataset holds {len(own)}")
-        out += own
-    return sorted(out, key=lambda s: s.path.name)
-
-
 def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fraction: float = 0.2,
         max_states: int | None = None, batch_states: int = 16, loss: LossOptions = LossOptions(),
         learning_rate: float | None = None, seed: int = 0, max_shards: int | str | None = None,
@@ -183,7 +160,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         raise ValueError(f"{init} takes observations {list(model.observation_space.shape)} and {model.policy.n_maps} "
                          f"maps; the dataset's are {stored['obs_shape']} and {stored['map_names']}")
     # every shard in the first one's layout (`load_shard`'s check, naming the shard), then a growing dataset's past
-    shards = select_shards(dataset.load_dataset(data, expect_layout=stored), max_shards)
+    shards = dataset.select_shards(dataset.load_dataset(data, expect_layout=stored), max_shards)
     train, val = split_states(shards, val_fraction, masks, progress, max_states)
     transforms = list(model.augment) if augment else []
     anchor_net = copy.deepcopy(model.q_net).requires_grad_(False) if anchor > 0 else None
