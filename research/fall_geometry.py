@@ -70,12 +70,10 @@ def load_sets(data: pathlib.Path, val_fraction: float, max_shards: str | None, f
     ``val_fraction``), the scene of each validation state (the two-fold split of `twofold` keeps a scene's
     states together) and, with ``fresh``, the test set."""
     from shelf_env.privileged import dataset
-    from shelf_env.privileged.dataset import select_shards
-
     if not 0 < val_fraction < 1:
         raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
     every = dataset.load_dataset(data)
-    shards = select_shards(every, max_shards)
+    shards = dataset.select_shards(every, max_shards)
     train, val, val_index = fall_risk.split_teacher_shards(shards, val_fraction, name=str(data))
     scene = np.concatenate([shard.arrays["state_episode"].astype(np.int64) + 1000 * k
                             for k, shard in enumerate(shards)])
@@ -91,10 +89,10 @@ def fresh_split(data: pathlib.Path, used: str | None, fresh: str) -> fall_risk.S
 
 
 def _fresh(shards: list[Any], used: str | None, fresh: str) -> fall_risk.Split:
-    from shelf_env.privileged.dataset import select_shards
+    from shelf_env.privileged import dataset
 
-    taken = {s.path.name for s in select_shards(shards, used)}
-    chosen = [s for s in select_shards(shards, fresh) if s.path.name not in taken]
+    taken = {s.path.name for s in dataset.select_shards(shards, used)}
+    chosen = [s for s in dataset.select_shards(shards, fresh) if s.path.name not in taken]
     if not chosen:
         raise ValueError(f"--fresh {fresh} selects no shard that --max-shards {used} leaves out")
     return fall_risk.teacher_split(chosen, np.arange(sum(s.num_states for s in chosen)))

@@ -413,10 +413,8 @@ def load_splits(data: pathlib.Path, val_fraction: float, max_shards: str | None 
     if not 0 < val_fraction < 1:
         raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
     if dataset.shard_files(data):
-        from shelf_env.privileged.dataset import select_shards
-
-        train, val, _ = split_teacher_shards(select_shards(dataset.load_dataset(data), max_shards), val_fraction,
-                                             max_states, str(data))
+        train, val, _ = split_teacher_shards(dataset.select_shards(dataset.load_dataset(data), max_shards),
+                                             val_fraction, max_states, str(data))
         return train, val
     if max_shards is not None or max_states is not None:
         raise ValueError(f"max_shards and max_states select a teacher dataset's shards and states; {data} holds "

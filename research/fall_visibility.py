@@ -41,10 +41,9 @@ def chosen_states(data: pathlib.Path, val_fraction: float, max_shards: str | Non
                   max_states: int | None) -> tuple[list[dataset.Shard], np.ndarray, np.ndarray]:
     """The shards and the (sorted) global state indices of the training states and the held-out states the
     fall model's split gives (`research.fall_risk.load_splits`'s choice)."""
-    from shelf_env.privileged.dataset import select_shards
     from shelf_env.training.distill import split_by_scene
 
-    shards = select_shards(dataset.load_dataset(data), max_shards)
+    shards = dataset.select_shards(dataset.load_dataset(data), max_shards)
     train, val = split_by_scene(shards, val_fraction)
     if not val:
         raise ValueError(f"{data}: {len(shards)} shards leave no held-out scene at val_fraction {val_fraction}")

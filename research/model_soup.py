@@ -89,10 +89,9 @@ def validation_losses(paths: Sequence[str | pathlib.Path], data: pathlib.Path, m
     from sb3_pixeldqn import PixelDoubleDQN
     from sb3_pixeldqn.distill import evaluate
     from shelf_env.privileged import dataset
-    from shelf_env.privileged.dataset import select_shards
     from shelf_env.training.distill import split_states
 
-    val = split_states(select_shards(dataset.load_dataset(data), max_shards), val_fraction)[1]
+    val = split_states(dataset.select_shards(dataset.load_dataset(data), max_shards), val_fraction)[1]
     if val is None:
         raise ValueError(f"{max_shards} at val_fraction {val_fraction} leaves no validation states")
     return {str(p): evaluate(PixelDoubleDQN.load(p, device="cpu").policy, val, loss) for p in paths}

@@ -550,9 +550,7 @@ def status(folder: pathlib.Path, since: str | None = None) -> str:
     shards = [s for s in every if s.path.name not in before]
     per_n: dict[int, list[int]] = {}
     per_series: dict[str, list[float]] = {}
-    seconds = 0.0
     for s in shards:
-        seconds += float(s.meta["seconds"])
         row_s = per_series.setdefault(s.path.name.partition("_")[0], [0, 0, 0, 0.0])
         row_s[0] += 1
         row_s[1] += s.num_states
@@ -567,8 +565,7 @@ def status(folder: pathlib.Path, since: str | None = None) -> str:
             row[1] += int((n_of_state == n).sum())
             row[2] += int((n_of_label == n).sum())
             row[3] += int((~s.arrays["label_valid"][n_of_label == n]).sum())
-    states = sum(s.num_states for s in shards)
-    labels = sum(s.num_labels for s in shards)
+    states, labels, seconds = (sum(r[k] for r in per_series.values()) for k in (1, 2, 3))
 
     def per_hour(count: float, secs: float) -> str:
         return f"{count / max(secs, 1e-9) * 3600:.0f}"
