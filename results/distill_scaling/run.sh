@@ -195,3 +195,10 @@ SHARDS=s00:55,s01:50,s02:205,s03:184,s04:155 distil p_s_dagger594_aug_mpa_r2_ce1
   --teacher-radius 2 --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger594_aug_mpa_r2_ce1.zip" \
   --resume-file "$DIR/p_s_dagger594_aug_mpa_r2_ce1_avg4.resume.pt"
 cp "$M/p_s_dagger594_aug_mpa_r2_ce1.distill.json" "$DIR/"
+# The twenty-sixth session: the twelfth point, all 1,438 shards at its start (55 + 50 + 205 + 570 of series 3 + 172 of
+# series 4 + 386 of series 5), the eleventh point's recipe unchanged, averaged and plain from one run (the curve reads
+# the plain one: results/distill_test/run.sh); checkpointed each epoch into the committed resume file
+SHARDS=s00:55,s01:50,s02:205,s03:570,s04:172,s05:386 distil p_s_dagger1383_aug_mpa_r2_ce1_avg4 all --anchor 1.0 \
+  --teacher-radius 2 --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger1383_aug_mpa_r2_ce1.zip" \
+  --resume-file "$DIR/p_s_dagger1383_aug_mpa_r2_ce1_avg4.resume.pt"
+cp "$M/p_s_dagger1383_aug_mpa_r2_ce1.distill.json" "$DIR/"
