@@ -142,6 +142,11 @@ m=p_s_dagger594_aug_mpa_r2_ce1
 [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
 .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test "$@"
 .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
+# the twenty-sixth session: the twelfth point (all 1,438 shards at its start), plain: the curve's point
+m=p_s_dagger1383_aug_mpa_r2_ce1
+[ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
+.venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test "$@"
+.venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
 # ... and the P+S shipped in the twelfth session (the eleventh's seed-1 averaged model): its cells at N = 5, 8, 11 from
 # its §V grid (results/models_v3, the same scenes), its falls at N = 8 as every point's
 s1=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4=examples/pretrained/p_s.zip
@@ -162,7 +167,7 @@ s1=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4=examples/pretrained/p_s.zip
   $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip+loop-breaker $M/p_s_dagger289_aug_mpa_r2_ce1.zip \
   $M/p_s_dagger289_aug_mpa_r2_ce1_avg4.zip "$s1" $M/p_s_dagger289_aug_mpa_r2_ce1_seed1.zip \
   $M/p_s_dagger289_aug_mpa_r2_ce1_seed2.zip $M/p_s_dagger375_aug_mpa_r2_ce1.zip $M/p_s_dagger594_aug_mpa_r2_ce1.zip \
-  --ns 5,8,11 --runs 30 --seeds 1 \
+  $M/p_s_dagger1383_aug_mpa_r2_ce1.zip --ns 5,8,11 --runs 30 --seeds 1 \
   --object-sets ycb --out results/distill_test --summarize-only
 # the held-out scaling curve: falls and SR on the first 10 scenes per N (falls.json), and each model's SR and
 # margin over the better heuristic on every evaluation scene it played (90 per N for the cross-entropy models)
