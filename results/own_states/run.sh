@@ -9,8 +9,9 @@
 # The twenty-first session: candidate C, A fine-tuned for 2 epochs on every shard complete at its start, on the same
 # validation scenes (the other policies' cells are already in val90): steps c and valc.
 # The twenty-second session: candidate D, C without series 5 (steps d and vald).
-# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|d|vald|all|openc|closedc|fallsc|
-#   opend|closedd|fallsd|series]
+# The twenty-sixth session: candidate E, the scaling curve's twelfth point (averaged weights), as A was (e, vale).
+# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|d|vald|e|vale|all|openc|closedc|fallsc|
+#   opend|closedd|fallsd|opene|closede|fallse|series]
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -25,12 +26,16 @@ a=p_s_dagger594_aug_mpa_r2_ce1_avg4  # candidate A
 b=p_s_own5  # candidate B
 S05=s05:22  # every series-5 shard complete when B's run started (17:44, twentieth session)
 step=${1:-all}
-if [[ $step == a || $step == all ]]; then
-  if [ ! -f "$out/$a.zip" ]; then
-    [ -f "$M/$a.zip" ] || bash results/distill_scaling/run.sh
-    cp -p "$M/$a.zip" "$M/$a.distill.json" "$out/"
+point() {  # point NAME: a scaling-curve model copied here from its run (trained first if missing), its risk model
+  local m=$1
+  if [ ! -f "$out/$m.zip" ]; then
+    [ -f "$M/$m.zip" ] || bash results/distill_scaling/run.sh
+    cp -p "$M/$m.zip" "$M/$m.distill.json" "$out/"
   fi
-  cp -p "$risk" "$out/$a.geometry_risk.pt"
+  cp -p "$risk" "$out/$m.geometry_risk.pt"
+}
+if [[ $step == a || $step == all ]]; then
+  point $a
 fi
 if [[ $step == b || $step == all ]]; then
   [ -f "$out/$b.zip" ] || OMP_NUM_THREADS=2 python -m shelf_env.training.distill --data data/teacher \
@@ -56,12 +61,16 @@ SD=s00:55,s01:50,s02:205,s03:246,s04:172
 if [[ $step == d || $step == all ]]; then
   finetune $d "$SD"
 fi
+e=p_s_dagger1383_aug_mpa_r2_ce1_avg4  # candidate E: the scaling curve's twelfth point, averaged (twenty-sixth session)
+if [[ $step == e || $step == all ]]; then
+  point $e
+fi
 # Validation: seeds 2000-2002, N = 5, 8, 11. Each validation step (and all, once) evaluates every candidate in one
 # list (cells already played are kept, the shipped policy's copied from results/stricter_filter/val90), so that
 # val90's summary holds them all whichever step ran last; each step then writes its own candidate's pairs.
-if [[ $step == val || $step == valc || $step == vald || $step == all ]]; then
+if [[ $step == val || $step == valc || $step == vald || $step == vale || $step == all ]]; then
   python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
-      "$out/$d.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
+      "$out/$d.zip$wrap" "$out/$e.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
       --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/stricter_filter/val90
 fi
 pairs() {  # pairs NAME AGAINST...: NAME (wrapped) against each label on the validation scenes
@@ -82,6 +91,9 @@ fi
 if [[ $step == vald || $step == all ]]; then
   pairs $d $old $a$wrap $c$wrap
 fi
+if [[ $step == vale || $step == all ]]; then
+  pairs $e $old $a$wrap
+fi
 candidate="$out/$a.zip$wrap"  # the candidate that passed validation
 new=$a$wrap  # its cells' label
 ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results/models_v3)
@@ -99,9 +111,9 @@ if [[ $step == falls || $step == all ]]; then
   # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
   python -m shelf_env.evaluation.falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
 fi
-# Candidates C and D on the held-out scenes, only where they passed validation (the page's rules; not part of
-# "all"): each in its own folder ($out/c, $out/d), every other policy's cells (A's too) copied from this folder's
-# open/ and closed_safe/; the candidate against A too.
+# Candidates C, D and E on the held-out scenes, only where they passed validation (the page's rules; not part of
+# "all"): each in its own folder ($out/c, $out/d, $out/e), every other policy's cells (A's too) copied from this
+# folder's open/ and closed_safe/; the candidate against A too.
 held() {  # held open|closed|falls NAME DIR
   local mode=$1 m=$2 dir=$3
   case $mode in
@@ -118,7 +130,7 @@ held() {  # held open|closed|falls NAME DIR
       python -m shelf_env.evaluation.falls "$out/$m.zip$wrap" --ns 8 --runs 30 --seed 0 --out "$dir/falls30.json" ;;
   esac
 }
-for x in c d; do
+for x in c d e; do
   for mode in open closed falls; do
     if [[ $step == "$mode$x" ]]; then
       held $mode "${!x}" "$out/$x"
