@@ -188,17 +188,18 @@ P=()
 for v in "${V90[@]}"; do P+=("$M/$v.zip"); done
 "$PY" -m shelf_env.cli.evaluate --policies "${P[@]}" "$M/$E.ensemble.json" --ns 5,8,11 \
   --runs 30 --seeds 3 --first-seed 2000 --object-sets ycb --out "$DIR/val90" --summarize-only
+# A curve point from every shard at a session's start: the averaged model and the plain one (the curve reads the plain
+# one: results/distill_test/run.sh) from one run, the cross-entropy recipe, checkpointed each epoch into a resume file
+# here (commit it when a session ends mid-run; the run goes on from it and removes it when done)
+whole() {  # whole NAME SHARDS: NAME the plain model, NAME_avg4 the averaged one
+  local name=$1
+  SHARDS=$2 distil "${name}_avg4" all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 4 \
+    --last-out "$M/$name.zip" --resume-file "$DIR/${name}_avg4.resume.pt"
+  cp "$M/$name.distill.json" "$DIR/"
+}
 # The nineteenth session: the eleventh point, all 649 shards at its start (55 + 50 + 205 + 184 of series 3 + 155 of
-# series 4), averaged and plain from one run (the curve reads the plain one: results/distill_test/run.sh)
-# (longer than a session on 2 cores: it checkpoints each epoch into the committed resume file and goes on from it)
-SHARDS=s00:55,s01:50,s02:205,s03:184,s04:155 distil p_s_dagger594_aug_mpa_r2_ce1_avg4 all --anchor 1.0 \
-  --teacher-radius 2 --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger594_aug_mpa_r2_ce1.zip" \
-  --resume-file "$DIR/p_s_dagger594_aug_mpa_r2_ce1_avg4.resume.pt"
-cp "$M/p_s_dagger594_aug_mpa_r2_ce1.distill.json" "$DIR/"
+# series 4), distilled across two sessions
+whole p_s_dagger594_aug_mpa_r2_ce1 s00:55,s01:50,s02:205,s03:184,s04:155
 # The twenty-sixth session: the twelfth point, all 1,438 shards at its start (55 + 50 + 205 + 570 of series 3 + 172 of
-# series 4 + 386 of series 5), the eleventh point's recipe unchanged, averaged and plain from one run (the curve reads
-# the plain one: results/distill_test/run.sh); checkpointed each epoch into the committed resume file
-SHARDS=s00:55,s01:50,s02:205,s03:570,s04:172,s05:386 distil p_s_dagger1383_aug_mpa_r2_ce1_avg4 all --anchor 1.0 \
-  --teacher-radius 2 --teacher-temperature 1 --average-last 4 --last-out "$M/p_s_dagger1383_aug_mpa_r2_ce1.zip" \
-  --resume-file "$DIR/p_s_dagger1383_aug_mpa_r2_ce1_avg4.resume.pt"
-cp "$M/p_s_dagger1383_aug_mpa_r2_ce1.distill.json" "$DIR/"
+# series 4 + 386 of series 5), the eleventh point's recipe unchanged
+whole p_s_dagger1383_aug_mpa_r2_ce1 s00:55,s01:50,s02:205,s03:570,s04:172,s05:386

@@ -132,21 +132,15 @@ for m in p_s_dagger289_aug_mpa_r2_ce1 p_s_dagger289_aug_mpa_r2_ce1_avg4 p_s_dagg
     --out results/distill_test "$@"
   .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
 done
-# the fifteenth session: the tenth point (all 430 shards at its start), plain: the curve's point
-m=p_s_dagger375_aug_mpa_r2_ce1
-[ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
-.venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test "$@"
-.venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
-# the nineteenth session: the eleventh point (all 649 shards at its start), plain: the curve's point
-m=p_s_dagger594_aug_mpa_r2_ce1
-[ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
-.venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test "$@"
-.venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
-# the twenty-sixth session: the twelfth point (all 1,438 shards at its start), plain: the curve's point
-m=p_s_dagger1383_aug_mpa_r2_ce1
-[ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
-.venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb --out results/distill_test "$@"
-.venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
+# the curve's points distilled from every shard at a session's start, plain (the curve reads them): the tenth (the
+# fifteenth session, 430 shards), the eleventh (the nineteenth, 649), the twelfth (the twenty-sixth, 1,438)
+for m in p_s_dagger375_aug_mpa_r2_ce1 p_s_dagger594_aug_mpa_r2_ce1 p_s_dagger1383_aug_mpa_r2_ce1; do
+  [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
+  .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
+    --out results/distill_test "$@"
+  .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 \
+    --out results/distill_test/falls30.json
+done
 # ... and the P+S shipped in the twelfth session (the eleventh's seed-1 averaged model): its cells at N = 5, 8, 11 from
 # its §V grid (results/models_v3, the same scenes), its falls at N = 8 as every point's
 s1=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4=examples/pretrained/p_s.zip
