@@ -191,10 +191,11 @@ for v in "${V90[@]}"; do P+=("$M/$v.zip"); done
 # A curve point from every shard at a session's start: the averaged model and the plain one (the curve reads the plain
 # one: results/distill_test/run.sh) from one run, the cross-entropy recipe, checkpointed each epoch into a resume file
 # here (commit it when a session ends mid-run; the run goes on from it and removes it when done)
-whole() {  # whole NAME SHARDS: NAME the plain model, NAME_avg4 the averaged one
-  local name=$1
-  SHARDS=$2 distil "${name}_avg4" all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 4 \
-    --last-out "$M/$name.zip" --resume-file "$DIR/${name}_avg4.resume.pt"
+whole() {  # whole NAME SHARDS [OPTIONS...]: NAME the plain model, NAME_avg4 the averaged one; OPTIONS (--seed) to distil
+  local name=$1 shards=$2
+  shift 2
+  SHARDS=$shards distil "${name}_avg4" all --anchor 1.0 --teacher-radius 2 --teacher-temperature 1 --average-last 4 \
+    --last-out "$M/$name.zip" --resume-file "$DIR/${name}_avg4.resume.pt" "$@"
   cp "$M/$name.distill.json" "$DIR/"
 }
 # The nineteenth session: the eleventh point, all 649 shards at its start (55 + 50 + 205 + 184 of series 3 + 155 of
@@ -203,3 +204,7 @@ whole p_s_dagger594_aug_mpa_r2_ce1 s00:55,s01:50,s02:205,s03:184,s04:155
 # The twenty-sixth session: the twelfth point, all 1,438 shards at its start (55 + 50 + 205 + 570 of series 3 + 172 of
 # series 4 + 386 of series 5), the eleventh point's recipe unchanged
 whole p_s_dagger1383_aug_mpa_r2_ce1 s00:55,s01:50,s02:205,s03:570,s04:172,s05:386
+# The twenty-seventh session on: the twelfth point's seed-1 and seed-2 replicates (the same shards and recipe, another
+# batch order and augmentation), as the ninth point's were
+whole p_s_dagger1383_aug_mpa_r2_ce1_seed1 s00:55,s01:50,s02:205,s03:570,s04:172,s05:386 --seed 1
+whole p_s_dagger1383_aug_mpa_r2_ce1_seed2 s00:55,s01:50,s02:205,s03:570,s04:172,s05:386 --seed 2

@@ -133,8 +133,10 @@ for m in p_s_dagger289_aug_mpa_r2_ce1 p_s_dagger289_aug_mpa_r2_ce1_avg4 p_s_dagg
   .venv/bin/python -m shelf_env.evaluation.falls $M/$m.zip --ns 8 --runs 30 --seed 0 --out results/distill_test/falls30.json
 done
 # the curve's points distilled from every shard at a session's start, plain (the curve reads them): the tenth (the
-# fifteenth session, 430 shards), the eleventh (the nineteenth, 649), the twelfth (the twenty-sixth, 1,438)
-for m in p_s_dagger375_aug_mpa_r2_ce1 p_s_dagger594_aug_mpa_r2_ce1 p_s_dagger1383_aug_mpa_r2_ce1; do
+# fifteenth session, 430 shards), the eleventh (the nineteenth, 649), the twelfth (the twenty-sixth, 1,438) and its
+# seed-1 and seed-2 replicates (the twenty-seventh session on)
+for m in p_s_dagger375_aug_mpa_r2_ce1 p_s_dagger594_aug_mpa_r2_ce1 p_s_dagger1383_aug_mpa_r2_ce1 \
+    p_s_dagger1383_aug_mpa_r2_ce1_seed1 p_s_dagger1383_aug_mpa_r2_ce1_seed2; do
   [ -f $M/$m.zip ] || bash results/distill_scaling/run.sh
   .venv/bin/shelf-evaluate --policies $M/$m.zip --ns 5,8,11 --runs 30 --seeds 3 --object-sets ycb \
     --out results/distill_test "$@"
@@ -161,7 +163,8 @@ s1=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4=examples/pretrained/p_s.zip
   $M/p_s_dagger201_aug_mpa_r2_ce1_avg4.zip+loop-breaker $M/p_s_dagger289_aug_mpa_r2_ce1.zip \
   $M/p_s_dagger289_aug_mpa_r2_ce1_avg4.zip "$s1" $M/p_s_dagger289_aug_mpa_r2_ce1_seed1.zip \
   $M/p_s_dagger289_aug_mpa_r2_ce1_seed2.zip $M/p_s_dagger375_aug_mpa_r2_ce1.zip $M/p_s_dagger594_aug_mpa_r2_ce1.zip \
-  $M/p_s_dagger1383_aug_mpa_r2_ce1.zip --ns 5,8,11 --runs 30 --seeds 1 \
+  $M/p_s_dagger1383_aug_mpa_r2_ce1.zip $M/p_s_dagger1383_aug_mpa_r2_ce1_seed1.zip \
+  $M/p_s_dagger1383_aug_mpa_r2_ce1_seed2.zip --ns 5,8,11 --runs 30 --seeds 1 \
   --object-sets ycb --out results/distill_test --summarize-only
 # the held-out scaling curve: falls and SR on the first 10 scenes per N (falls.json), and each model's SR and
 # margin over the better heuristic on every evaluation scene it played (90 per N for the cross-entropy models)

@@ -10,8 +10,9 @@
 # validation scenes (the other policies' cells are already in val90): steps c and valc.
 # The twenty-second session: candidate D, C without series 5 (steps d and vald).
 # The twenty-sixth session: candidate E, the scaling curve's twelfth point (averaged weights), as A was (e, vale).
-# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|d|vald|e|vale|all|openc|closedc|fallsc|
-#   opend|closedd|fallsd|opene|closede|fallse|series]
+# The twenty-seventh session: candidate F, the twelfth point's seed-1 replicate (averaged weights), as E (f, valf).
+# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|d|vald|e|vale|f|valf|all|openc|closedc|
+#   fallsc|opend|closedd|fallsd|opene|closede|fallse|openf|closedf|fallsf|series]
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -65,12 +66,16 @@ e=p_s_dagger1383_aug_mpa_r2_ce1_avg4  # candidate E: the scaling curve's twelfth
 if [[ $step == e || $step == all ]]; then
   point $e
 fi
+f=p_s_dagger1383_aug_mpa_r2_ce1_seed1_avg4  # candidate F: the twelfth point's seed-1 replicate, averaged (27th session)
+if [[ $step == f || $step == all ]]; then
+  point $f
+fi
 # Validation: seeds 2000-2002, N = 5, 8, 11. Each validation step (and all, once) evaluates every candidate in one
 # list (cells already played are kept, the shipped policy's copied from results/stricter_filter/val90), so that
 # val90's summary holds them all whichever step ran last; each step then writes its own candidate's pairs.
-if [[ $step == val || $step == valc || $step == vald || $step == vale || $step == all ]]; then
+if [[ $step == val || $step == valc || $step == vald || $step == vale || $step == valf || $step == all ]]; then
   python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
-      "$out/$d.zip$wrap" "$out/$e.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
+      "$out/$d.zip$wrap" "$out/$e.zip$wrap" "$out/$f.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
       --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/stricter_filter/val90
 fi
 pairs() {  # pairs NAME AGAINST...: NAME (wrapped) against each label on the validation scenes
@@ -94,6 +99,9 @@ fi
 if [[ $step == vale || $step == all ]]; then
   pairs $e $old $a$wrap
 fi
+if [[ $step == valf || $step == all ]]; then
+  pairs $f $old $a$wrap $e$wrap
+fi
 candidate="$out/$a.zip$wrap"  # the candidate that passed validation
 new=$a$wrap  # its cells' label
 ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results/models_v3)
@@ -111,8 +119,8 @@ if [[ $step == falls || $step == all ]]; then
   # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
   python -m shelf_env.evaluation.falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
 fi
-# Candidates C, D and E on the held-out scenes, only where they passed validation (the page's rules; not part of
-# "all"): each in its own folder ($out/c, $out/d, $out/e), every other policy's cells (A's too) copied from this
+# Candidates C, D, E and F on the held-out scenes, only where they passed validation (the page's rules; not part of
+# "all"): each in its own folder ($out/c, $out/d, $out/e, $out/f), every other policy's cells (A's too) copied from this
 # folder's open/ and closed_safe/; the candidate against A too.
 held() {  # held open|closed|falls NAME DIR
   local mode=$1 m=$2 dir=$3
@@ -130,7 +138,7 @@ held() {  # held open|closed|falls NAME DIR
       python -m shelf_env.evaluation.falls "$out/$m.zip$wrap" --ns 8 --runs 30 --seed 0 --out "$dir/falls30.json" ;;
   esac
 }
-for x in c d e; do
+for x in c d e f; do
   for mode in open closed falls; do
     if [[ $step == "$mode$x" ]]; then
       held $mode "${!x}" "$out/$x"
