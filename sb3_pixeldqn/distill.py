@@ -39,7 +39,11 @@ batch of states is the sum of four terms, each over every labelled pixel:
   relu(max_out Q + margin − max_near Q). A teacher means "this object" more than "this pixel", and a
   fully convolutional map can hardly raise one pixel a margin above its neighbours on the same
   object: with r = 0 the term's largest competitor is nearly always such a neighbour, and it
-  teaches nothing about which object to move.
+  teaches nothing about which object to move. With ``teacher_set`` the teacher's choice stands for a
+  set: its action and every labelled action of the state that kept the episode valid with a
+  ``progress`` at least the teacher's, where the teacher's is positive (each with its square). A
+  teacher breaks ties among equally good actions by its own order; without the set, each of those
+  ties is pushed down as if it were worse.
 
 It knows nothing of shelves: actions are flat indices of the policy's maps.
 """
@@ -70,7 +74,9 @@ class LossOptions:
     - ``teacher_radius``: the teacher's action stands for its map's cells within that many cells (0: the pixel);
     - ``progress_radius``: the lower action of a progress pair stands for the allowed cells of its map within
       that many cells (0: the pixel);
-    - ``teacher_temperature`` > 0: the teacher term as a cross-entropy at that temperature (0: the margin).
+    - ``teacher_temperature`` > 0: the teacher term as a cross-entropy at that temperature (0: the margin);
+    - ``teacher_set``: the teacher's action stands for itself and every labelled action of its state as good by
+      the labels (valid, progress at least the teacher's where the teacher's is positive; module docstring).
 
     Refuses negative or non-finite values by name."""
 
@@ -79,6 +85,7 @@ class LossOptions:
     teacher_radius: int = 0
     progress_radius: int = 0
     teacher_temperature: float = 0.0
+    teacher_set: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "weights", tuple(float(w) for w in self.weights))
@@ -89,6 +96,8 @@ class LossOptions:
         for name in ("teacher_radius", "progress_radius"):
             if int(getattr(self, name)) != getattr(self, name):
                 raise ValueError(f"{name} must be a whole number of cells, got {getattr(self, name)}")
+        if not isinstance(self.teacher_set, bool):
+            raise ValueError(f"teacher_set must be True or False, got {self.teacher_set!r}")
         if len(self.weights) != 4:
             raise ValueError(f"weights must be 4 numbers (value, ranking, teacher, progress), got {self.weights}")
         for term, w in zip(("value", "ranking", "teacher", "progress"), self.weights):
@@ -207,6 +216,33 @@ def near_cells(actions: th.Tensor, grid: Sequence[int], radius: int) -> th.Tenso
             & ((c[None] - ac[:, None]).abs() <= radius))
 
 
+def teacher_sets(rows: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
+                 progress: th.Tensor, teacher: th.Tensor, n_actions: int, grid: Sequence[int] | None = None,
+                 radius: int = 0) -> th.Tensor:
+    """(R, n_actions) bool: for each state of ``rows`` (R,) the labelled actions as good as its teacher's by the
+    labels, each with its square of ``radius`` cells (``grid`` = (n_maps, H, W), needed where ``radius`` > 0):
+    valid, with a progress at least that of the teacher's own label, where that progress is positive. A state
+    whose teacher's action is unlabelled, invalid or made no progress gets none (its teacher's action alone)."""
+    n_states = int(teacher.shape[0])
+    is_teacher = (label_action == teacher[label_state]) & ~invalid
+    bar = th.full((n_states,), th.inf, dtype=progress.dtype, device=progress.device)
+    bar[label_state[is_teacher]] = progress[is_teacher]  # the teacher's progress, +inf where it has no label
+    bar = th.where(bar > 0, bar, th.full_like(bar, th.inf))  # no progress: no set
+    row_of = th.full((n_states,), -1, dtype=th.long, device=rows.device)
+    row_of[rows] = th.arange(len(rows), device=rows.device)
+    good = ~invalid & (progress >= bar[label_state]) & (row_of[label_state] >= 0)
+    out = th.zeros((len(rows), n_actions), dtype=th.bool, device=rows.device)
+    if not good.any():
+        return out
+    where, actions = row_of[label_state[good]], label_action[good]
+    if radius > 0:
+        assert grid is not None
+        cells = near_cells(actions, grid, radius).to(th.float32)
+        return th.zeros((len(rows), n_actions), device=rows.device).index_add_(0, where, cells) > 0
+    out[where, actions] = True
+    return out
+
+
 def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
                       value: th.Tensor, teacher: th.Tensor, options: LossOptions = LossOptions(),
                       masks: th.Tensor | None = None, progress: th.Tensor | None = None,
@@ -220,9 +256,13 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
     the higher action. With ``options.teacher_temperature`` > 0 the teacher term is a cross-entropy instead
     of a margin: the softmax of Q / temperature over the allowed actions should put its mass on the
     teacher's action (its square), logsumexp(allowed) − logsumexp(teacher's cells), a gradient on every
-    allowed action rather than on the two extremes. Returns the loss and its terms."""
+    allowed action rather than on the two extremes. ``options.teacher_set`` (needs ``progress``) widens the
+    teacher's cells to the set of `teacher_sets`. Returns the loss and its terms."""
     margin, teacher_radius, progress_radius = options.margin, options.teacher_radius, options.progress_radius
     teacher_temperature = options.teacher_temperature
+    if options.teacher_set and progress is None:
+        raise ValueError("teacher_set needs the labels' progress scores to tell which actions are as good as the "
+                         "teacher's; got none")
     for name, radius in (("teacher_radius", teacher_radius), ("progress_radius", progress_radius)):
         if radius > 0 and grid is None:
             raise ValueError(f"{name} > 0 needs the grid of the flat actions to place its square; got {radius} "
@@ -267,6 +307,10 @@ def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: t
         else:
             near = th.zeros_like(allowed)
             near[at, t] = True
+        if options.teacher_set:
+            assert progress is not None
+            near = near | teacher_sets(rows, label_state, label_action, invalid, progress, teacher, near.shape[1],
+                                       grid, teacher_radius)
         q_rows = q_maps[rows]
         none = th.full_like(q_rows, -th.inf)
         if teacher_temperature > 0:

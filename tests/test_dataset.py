@@ -205,13 +205,14 @@ def test_shards_become_labelled_states_and_distil_into_the_shipped_layout(
     assert distill_cli.main(["--data", str(one_shard), "--init", MODEL, "--out", str(out), "--epochs", "1",
                              "--val-fraction", "0", "--teacher-radius", "2", "--teacher-weight", "3",
                              "--progress-radius", "1", "--progress-weight", "2", "--teacher-temperature", "0.5",
-                             "--seed", "3", "--batch-states", "4"]) == 0
+                             "--seed", "3", "--batch-states", "4", "--teacher-set"]) == 0
     report = json.loads(out.with_suffix(".distill.json").read_text())
     # what reproduces it: a replicate at another seed differs from the first only in this field
     assert report["seed"] == 3 and report["batch_states"] == 4 and report["learning_rate"] is None
     assert report["train_states"] == shard.num_states and report["history"][-1]["train"]["loss"] > 0
     assert report["teacher_radius"] == 2 and report["teacher_weight"] == 3.0 and report["progress_radius"] == 1
     assert report["progress_weight"] == 2.0 and report["teacher_temperature"] == 0.5 and report["margin"] == 1.0
+    assert report["teacher_set"] is True
     from sb3_pixeldqn import PixelDoubleDQN
 
     assert PixelDoubleDQN.load(out).observation_space.shape == (4, 40, 60)
@@ -456,3 +457,23 @@ def test_series_table_counts_pushes_and_the_teacher_s_share_per_series(one_shard
     assert rows["s05"][:4] == [str(n), "0.0 %", "100.0 %", "0.0 %"]
     with pytest.raises(ValueError, match="no dataset shards"):
         series_table(tmp_path / "empty")
+
+
+def test_a_checkpoint_records_the_teacher_set_only_where_it_is_on(tmp_path: pathlib.Path) -> None:
+    """A checkpoint written before ``teacher_set`` existed recorded the loss without it; it still resumes under the
+    same loss (the option off), and one written with the option on is refused by a run without it."""
+    import dataclasses
+
+    import torch
+
+    from sb3_pixeldqn.distill import LossOptions
+    from shelf_env.training import distill as distill_cli
+
+    loss = LossOptions(teacher_radius=2, teacher_temperature=1.0)
+    old = {k: v for k, v in dataclasses.asdict(loss).items() if k != "teacher_set"}  # as written before the option
+    path = tmp_path / "old.resume.pt"
+    torch.save({"settings": {"loss": old}, "epoch": 3}, path)
+    assert distill_cli.load_checkpoint(path, {"loss": distill_cli.loss_settings(loss)})["epoch"] == 3
+    torch.save({"settings": {"loss": distill_cli.loss_settings(dataclasses.replace(loss, teacher_set=True))}}, path)
+    with pytest.raises(ValueError, match="checkpoint of a run with other settings \\(loss\\)"):
+        distill_cli.load_checkpoint(path, {"loss": distill_cli.loss_settings(loss)})

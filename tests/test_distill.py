@@ -9,7 +9,7 @@ import torch as th
 from pixel_envs import FindTheSquareEnv
 
 from sb3_pixeldqn import PixelDoubleDQN
-from sb3_pixeldqn.distill import LabelledStates, LossOptions, distill, distillation_loss, evaluate
+from sb3_pixeldqn.distill import LabelledStates, LossOptions, distill, distillation_loss, evaluate, teacher_sets
 
 
 def crafted(n_states: int = 24, seed: int = 0) -> tuple[PixelDoubleDQN, LabelledStates]:
@@ -283,12 +283,56 @@ def test_a_teacher_temperature_makes_the_teacher_term_a_cross_entropy_over_the_a
         LossOptions(teacher_temperature=-1.0)
 
 
+def test_a_teacher_set_holds_the_labelled_actions_as_good_as_the_teachers() -> None:
+    # state 0 (teacher 0, progress 1): action 2 valid and progress 1 (in), 3 valid progress 0 (out), 4 invalid
+    # progress 1 (out), 5 progress 2 (in); state 1 (teacher 6, progress 0: no set): 7 valid progress 1 (out);
+    # state 2 (teacher -1) is not a row
+    label_state = th.tensor([0, 0, 0, 0, 0, 1, 1, 2])
+    label_action = th.tensor([0, 2, 3, 4, 5, 6, 7, 8])
+    invalid = th.tensor([False, False, False, True, False, False, False, False])
+    progress = th.tensor([1.0, 1.0, 0.0, 1.0, 2.0, 0.0, 1.0, 1.0])
+    teacher = th.tensor([0, 6, -1])
+    sets = teacher_sets(th.tensor([0, 1]), label_state, label_action, invalid, progress, teacher, 15)
+    assert sets[0].nonzero().flatten().tolist() == [0, 2, 5] and not sets[1].any()
+    # with a radius each member brings its square: one map of 3 x 5, action 2 = (0, 2), 5 = (1, 0)
+    square = teacher_sets(th.tensor([0]), label_state, label_action, invalid, progress, teacher, 15, (1, 3, 5), 1)
+    assert square[0].nonzero().flatten().tolist() == [0, 1, 2, 3, 5, 6, 7, 8, 10, 11]
+    # a teacher whose own label fell, or that is unlabelled, gets no set
+    assert not teacher_sets(th.tensor([0]), label_state, label_action, th.tensor([True] + [False] * 7), progress,
+                            teacher, 15).any()
+    assert not teacher_sets(th.tensor([0]), label_state, label_action, invalid, progress, th.tensor([1, 6, -1]),
+                            15).any()
+
+
+def test_a_teacher_set_pulls_up_the_ties_the_teacher_broke_instead_of_pushing_them_down() -> None:
+    # the teacher picks 0 (progress 1); action 2 sorts as much (a tie), action 1 nothing; 3 is not allowed
+    args = (th.tensor([0, 0, 0]), th.tensor([0, 1, 2]), th.tensor([False, False, False]), th.full((3,), np.nan),
+            th.tensor([0]))
+    progress = th.tensor([1.0, 0.0, 1.0])
+    masks = th.tensor([[True, True, True, False]])
+    grads = {}
+    for teacher_set in (False, True):
+        q = th.tensor([[1.0, 0.0, 3.0, 9.0]], requires_grad=True)
+        options = LossOptions(weights=(0.0, 0.0, 1.0, 0.0), teacher_temperature=1.0, teacher_set=teacher_set)
+        loss, parts = distillation_loss(q, *args, options, masks=masks, progress=progress)
+        loss.backward()
+        grads[teacher_set] = q.grad[0].numpy().copy()
+        if teacher_set:  # the set {0, 2} against every allowed action
+            assert parts["teacher"] == pytest.approx(float(np.log(np.e + 1 + np.e ** 3) - np.log(np.e + np.e ** 3)),
+                                                     rel=1e-5)
+    assert grads[False][2] > 0 > grads[True][2]  # the tie: pushed down alone, pulled up in the set
+    assert grads[True][1] > 0 and grads[True][3] == 0  # the useless action still down; the disallowed untouched
+    with pytest.raises(ValueError, match="teacher_set needs the labels' progress scores"):
+        distillation_loss(q, *args, LossOptions(teacher_temperature=1.0, teacher_set=True), masks=masks)
+
+
 def test_loss_options_refuse_bad_values_by_name() -> None:
     assert LossOptions(weights=[1, 2, 3, 4]).weights == (1.0, 2.0, 3.0, 4.0)  # type: ignore[arg-type]
     for kwargs, message in (({"margin": float("nan")}, "margin must be a finite number >= 0"),
                             ({"teacher_radius": -1}, "teacher_radius must be a finite number >= 0, got -1"),
                             ({"progress_radius": 1.5}, "progress_radius must be a whole number of cells"),
                             ({"weights": (1.0, 1.0, 1.0)}, "weights must be 4 numbers"),
-                            ({"weights": (1.0, -1.0, 1.0, 1.0)}, "the ranking weight must be a finite number >= 0")):
+                            ({"weights": (1.0, -1.0, 1.0, 1.0)}, "the ranking weight must be a finite number >= 0"),
+                            ({"teacher_set": 1}, "teacher_set must be True or False, got 1")):
         with pytest.raises(ValueError, match=message):
             LossOptions(**kwargs)  # type: ignore[arg-type]

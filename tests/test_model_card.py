@@ -5,7 +5,7 @@ import json
 
 from shelf_env.evaluation import protocol as ev
 from shelf_env.training.config import PRESETS
-from shelf_env.training.model_card import main, model_card
+from shelf_env.training.model_card import main, model_card, recipe_terms
 
 
 def fake_run(tmp_path):
@@ -76,3 +76,11 @@ def test_cli_writes_several_cards_under_one_title_and_refuses_unmatched_counts(t
     assert main([str(run), str(run), "--zip", str(zip_path), "--out", str(tmp_path / "bad.md")]) == 2
     assert "one --zip and one --command per run: 2 runs, 1 zips" in capsys.readouterr().out
     assert not (tmp_path / "bad.md").exists()
+
+
+def test_a_distilled_cards_recipe_says_whether_the_teacher_term_took_a_set() -> None:
+    report = {"teacher_radius": 2, "teacher_temperature": 1.0, "progress": True, "augment": ["mirror"]}
+    assert recipe_terms(report)[1] == "a cross-entropy on the teacher's choice (temperature 1) on its 5 x 5-cell square"
+    with_set = recipe_terms({**report, "teacher_set": True, "teacher_temperature": 0.0, "margin": 2.0})
+    assert with_set[1] == ("a margin 2 on the teacher's choice and every labelled action as good by the labels on its "
+                           "5 x 5-cell square")

@@ -81,6 +81,12 @@ def load_checkpoint(path: pathlib.Path, settings: dict[str, Any]) -> dict[str, A
     return state
 
 
+def loss_settings(loss: LossOptions) -> dict[str, Any]:
+    """``loss`` as a checkpoint's settings record it: its fields, ``teacher_set`` only where it is on, so that a
+    checkpoint written before that option existed still resumes under the same loss."""
+    return {k: v for k, v in dataclasses.asdict(loss).items() if k != "teacher_set" or v}
+
+
 def split_by_scene(shards: list[dataset.Shard], val_fraction: float) -> tuple[list[int], list[int]]:
     """State indices (over the shards in order) of the training and validation scenes: the last
     ``val_fraction`` of each shard series' scenes (``meta["series"]``) are validation. Series are
@@ -131,10 +137,11 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     ``masks``: the teacher term ranges over every allowed action of a state (else its labelled actions).
     ``progress``: the progress term ranks a state's valid actions by the objects they sorted. ``anchor``:
     the weight that keeps unlabelled allowed actions at the starting model's values (0: none). ``loss``: the
-    loss's margin, weights, radii and temperature in training (`LossOptions`); the validation loss keeps the
-    default weights, so that recipes compare. ``average_last`` > 1: the saved model's weights are the mean of its
-    weights at the end of each of the last that many epochs (one model from a stretch of training rather than the
-    last step's draw; the report's ``averaged`` holds its validation); 1: the last epoch's. ``last_out``: with
+    loss's margin, weights, radii, temperature and teacher set in training (`LossOptions`); the validation loss
+    keeps the default weights and the teacher's action alone, so that recipes compare. ``average_last`` > 1: the
+    saved model's weights are the mean of its weights at the end of each of the last that many epochs (one model
+    from a stretch of training rather than the last step's draw; the report's ``averaged`` holds its validation);
+    1: the last epoch's. ``last_out``: with
     ``average_last`` > 1, also save the last epoch's weights there (the model a run without averaging saves, since
     distillation is deterministic for a seed), its report beside it. ``resume_file``: the epoch checkpoint (default
     `resume_path` of ``out``; module docstring)."""
@@ -146,7 +153,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
         raise ValueError(f"average_last must be between 1 and the epochs ({epochs}), got {average_last}")
     if last_out is not None and (average_last == 1 or pathlib.Path(last_out).resolve() == pathlib.Path(out).resolve()):
         raise ValueError("last_out needs average_last > 1 and a path other than out")
-    val_loss = dataclasses.replace(loss, weights=DEFAULT_WEIGHTS)
+    val_loss = dataclasses.replace(loss, weights=DEFAULT_WEIGHTS, teacher_set=False)
     if not pathlib.Path(init).is_file():
         raise ValueError(f"--init {init!r} does not exist")
     model = PixelDoubleDQN.load(init, device="cpu")
@@ -170,7 +177,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
     checkpoint = resume_path(out) if resume_file is None else pathlib.Path(resume_file)
     settings = {"init_sha256": hashlib.sha256(pathlib.Path(init).read_bytes()).hexdigest(),
                 "shards": [s.path.name for s in shards], "val_fraction": val_fraction, "max_states": max_states,
-                "batch_states": batch_states, "loss": dataclasses.asdict(loss), "learning_rate": learning_rate,
+                "batch_states": batch_states, "loss": loss_settings(loss), "learning_rate": learning_rate,
                 "seed": seed, "augment": augment, "masks": masks, "progress": progress, "anchor": anchor,
                 "average_last": average_last, "epochs": epochs}
     resumed = load_checkpoint(checkpoint, settings)
@@ -219,6 +226,7 @@ def run(data: pathlib.Path, init: str, out: pathlib.Path, epochs: int, val_fract
               "anchor": anchor, "margin": loss.margin, "teacher_radius": loss.teacher_radius,
               "teacher_weight": loss.weights[2], "progress_radius": loss.progress_radius,
               "progress_weight": loss.weights[3], "teacher_temperature": loss.teacher_temperature,
+              "teacher_set": loss.teacher_set,
               "seed": seed, "batch_states": batch_states, "learning_rate": learning_rate,
               "average_last": average_last, **({"averaged": averaged} if averaged is not None else {}),
               "seconds": round(before + time.monotonic() - start, 1), "history": history}
@@ -257,6 +265,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--teacher-weight", type=float, default=1.0, help="weight of the teacher term in training")
     p.add_argument("--teacher-temperature", type=float, default=0.0, help="> 0: the teacher term as a "
                    "cross-entropy of the allowed actions' softmax at this temperature (0: the margin)")
+    p.add_argument("--teacher-set", action="store_true", help="the teacher's action stands for every labelled "
+                   "action of its state as good by the labels (valid, sorting at least as many objects, where the "
+                   "teacher's sorts one): ties the teacher broke by its own order are not pushed down")
     p.add_argument("--progress-weight", type=float, default=1.0, help="weight of the progress term in training")
     p.add_argument("--progress-radius", type=int, default=0, help="in the progress term the lower action stands "
                    "for the allowed cells of its map within this many cells (0: the pixel)")
@@ -269,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     try:
         loss = LossOptions(args.margin, (1.0, 1.0, args.teacher_weight, args.progress_weight), args.teacher_radius,
-                           args.progress_radius, args.teacher_temperature)
+                           args.progress_radius, args.teacher_temperature, args.teacher_set)
         run(args.data, args.init, args.out, args.epochs, args.val_fraction, args.max_states, args.batch_states,
             loss, args.learning_rate, args.seed, args.max_shards, augment=not args.no_augment,
             masks=args.teacher_over == "masked", progress=not args.no_progress, anchor=args.anchor,

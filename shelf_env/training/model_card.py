@@ -205,9 +205,11 @@ def recipe_terms(report: dict[str, Any]) -> list[str]:
     side = 2 * int(report.get("teacher_radius") or 0) + 1
     square = f" on its {side} x {side}-cell square" if side > 1 else ""
     temperature = report.get("teacher_temperature")
+    choice = ("the teacher's choice and every labelled action as good by the labels" if report.get("teacher_set")
+              else "the teacher's choice")
     terms = ["a value and a ranking term on every labelled action's outcome",
-             (f"a cross-entropy on the teacher's choice (temperature {temperature:g}){square}" if temperature
-              else f"a margin {report.get('margin', 1.0):g} on the teacher's choice{square}")]
+             (f"a cross-entropy on {choice} (temperature {temperature:g}){square}" if temperature
+              else f"a margin {report.get('margin', 1.0):g} on {choice}{square}")]
     if report.get("progress"):
         terms.append("the progress term")
     if report.get("anchor"):
