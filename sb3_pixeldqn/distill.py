@@ -354,10 +354,12 @@ def evaluate(policy: Any, data: LabelledStates, options: LossOptions = LossOptio
     network's best labelled action of a state is one that ended the episode invalid (``invalid_choice``:
     the greedy choice among the labelled actions) and, where the states carry masks, how often its masked
     argmax over every action is the teacher's action (``teacher_choice``) and, with ``teacher_radius`` > 0,
-    lies within ``options.teacher_radius`` cells of it on its map (``teacher_near``, where that radius is > 0)."""
+    lies within ``options.teacher_radius`` cells of it on its map (``teacher_near``, where that radius is > 0),
+    and, where the labels carry progress, how often it lies in the teacher's square or the square of a labelled
+    action as good (``teacher_set_choice``: `teacher_sets`, whether or not the loss uses them)."""
     teacher_radius = options.teacher_radius
     totals: dict[str, float] = {"loss": 0.0, "value": 0.0, "ranking": 0.0, "teacher": 0.0, "progress": 0.0}
-    invalid_choices = chosen = agree = near = taught = 0
+    invalid_choices = chosen = agree = near = in_set = taught = 0
     policy.set_training_mode(False)
     with th.no_grad():
         for start in range(0, len(data.obs), chunk):
@@ -377,6 +379,16 @@ def evaluate(policy: Any, data: LabelledStates, options: LossOptions = LossOptio
                 if teacher_radius > 0 and has.any():
                     close = near_cells(th.as_tensor(sub.teacher_action[has]), q_maps.shape[1:], teacher_radius).numpy()
                     near += int(close[np.arange(len(close)), greedy[has]].sum())
+                if sub.label_progress is not None and has.any():
+                    rows = np.flatnonzero(has)
+                    teacher_t = th.as_tensor(sub.teacher_action)
+                    square = (near_cells(teacher_t[rows], q_maps.shape[1:], teacher_radius) if teacher_radius > 0
+                              else F.one_hot(teacher_t[rows], q_np.shape[1]).bool())
+                    good = square | teacher_sets(th.as_tensor(rows), th.as_tensor(sub.label_state),
+                                                 th.as_tensor(sub.label_action), th.as_tensor(sub.label_invalid),
+                                                 th.as_tensor(sub.label_progress), teacher_t, q_np.shape[1],
+                                                 q_maps.shape[1:], teacher_radius)
+                    in_set += int(good.numpy()[np.arange(len(rows)), greedy[rows]].sum())
             for s in range(len(states)):
                 rows = np.flatnonzero(sub.label_state == s)
                 if len(rows):
@@ -388,6 +400,8 @@ def evaluate(policy: Any, data: LabelledStates, options: LossOptions = LossOptio
         out["teacher_choice"] = agree / taught
         if teacher_radius > 0:
             out["teacher_near"] = near / taught
+        if data.label_progress is not None:
+            out["teacher_set_choice"] = in_set / taught
     return out
 
 

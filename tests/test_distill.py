@@ -3,6 +3,8 @@ teaches the Q-maps which labelled actions end the episode invalid; bad data is r
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch as th
@@ -231,6 +233,26 @@ def test_teacher_near_counts_greedy_actions_within_the_radius() -> None:
     rows, cols = masked.teacher_action // 20, masked.teacher_action % 20
     assert far["teacher_near"] == pytest.approx(float(np.mean((rows <= 1) & (cols <= 1))))
     assert "teacher_near" not in evaluate(model.policy, masked)
+
+
+def test_teacher_set_choice_counts_greedy_actions_as_good_as_the_teachers() -> None:
+    model, data = crafted(n_states=8)
+    with th.no_grad():
+        for p in model.q_net.parameters():
+            p.zero_()  # a flat map: the masked argmax is action 0 for every state
+    assert (data.teacher_action != 0).all()
+    n = len(data.label_action)
+    # every old label sorts one object (the teacher's too); a new label at action 0 in each state, valid, that sorts
+    # one in states 0-3 (as good as the teacher's) and none in states 4-7
+    labelled = LabelledStates(data.obs, np.concatenate([data.label_state, np.arange(8)]),
+                              np.concatenate([data.label_action, np.zeros(8, int)]),
+                              np.concatenate([data.label_invalid, np.zeros(8, bool)]),
+                              np.concatenate([data.label_value, np.full(8, np.nan, np.float32)]), data.teacher_action,
+                              np.packbits(np.ones((8, 240), dtype=bool), axis=1),
+                              np.concatenate([np.ones(n, np.float32), (np.arange(8) < 4).astype(np.float32)]))
+    assert evaluate(model.policy, labelled)["teacher_set_choice"] == 0.5
+    assert evaluate(model.policy, labelled, LossOptions(teacher_radius=30))["teacher_set_choice"] == 1.0
+    assert "teacher_set_choice" not in evaluate(model.policy, dataclasses.replace(labelled, label_progress=None))
 
 
 def test_the_weights_choose_what_training_fits() -> None:
