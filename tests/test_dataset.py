@@ -477,3 +477,29 @@ def test_a_checkpoint_records_the_teacher_set_only_where_it_is_on(tmp_path: path
     torch.save({"settings": {"loss": distill_cli.loss_settings(dataclasses.replace(loss, teacher_set=True))}}, path)
     with pytest.raises(ValueError, match="checkpoint of a run with other settings \\(loss\\)"):
         distill_cli.load_checkpoint(path, {"loss": distill_cli.loss_settings(loss)})
+
+
+def test_teacher_ties_counts_labels_as_good_as_the_teachers_off_its_square(one_shard: pathlib.Path,
+                                                                           tmp_path: pathlib.Path) -> None:
+    from research.teacher_ties import count_ties
+
+    with np.load(dataset.shard_path(one_shard, 0, 0)) as data:
+        arrays = {k: data[k] for k in data.files}
+    h, w = arrays["obs"].shape[2:]
+    state, action = arrays["label_state"], arrays["label_action"]
+    first = state == 0
+    teacher = int(arrays["teacher_action"][0])
+    assert teacher >= 0 and (action[first] == teacher).any()
+    # state 0: every label valid and sorting one (the teacher's too); every other state: nothing sorted, no set
+    arrays = {**arrays, "label_valid": np.ones_like(arrays["label_valid"]),
+              "label_dsorted": np.where(first, 1, 0).astype(arrays["label_dsorted"].dtype)}
+    np.savez_compressed(tmp_path / "s00_00000.npz", **arrays)
+    shard = dataset.load_shard(tmp_path / "s00_00000.npz")
+    m, r, c = action // (h * w), action // w % h, action % w
+    tm, tr, tc = teacher // (h * w), teacher // w % h, teacher % w
+    off = first & ((m != tm) | (np.abs(r - tr) > 2) | (np.abs(c - tc) > 2))
+    ties = count_ties([shard], radius=2)
+    assert ties.states == int((arrays["teacher_action"] >= 0).sum()) and ties.sorted_one == 1
+    assert ties.ties == int(off.sum()) > 0 and ties.with_ties == 1
+    assert sum(ties.sources.values()) == ties.ties
+    assert count_ties([shard], radius=100).ties == int((first & (m != tm)).sum())  # a square as large as the map

@@ -10,9 +10,10 @@
 # validation scenes (the other policies' cells are already in val90): steps c and valc.
 # The twenty-second session: candidate D, C without series 5 (steps d and vald).
 # The twenty-sixth session: candidate E, the scaling curve's twelfth point (averaged weights), as A was (e, vale).
-# The twenty-seventh session: candidate F, the twelfth point's seed-1 replicate (averaged weights), as E (f, valf).
-# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|d|vald|e|vale|f|valf|all|openc|closedc|
-#   fallsc|opend|closedd|fallsd|opene|closede|fallse|openf|closedf|fallsf|series]
+# The twenty-seventh session: candidate F, the twelfth point's seed-1 replicate (averaged weights), as E (f, valf);
+# candidate G, the eleventh point with a set target for the teacher term (docs/experiments/teacher-set.md; g, valg).
+# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|d|vald|e|vale|f|valf|g|valg|all|openc|
+#   closedc|fallsc|opend|closedd|fallsd|opene|closede|fallse|openf|closedf|fallsf|openg|closedg|fallsg|series]
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -27,10 +28,10 @@ a=p_s_dagger594_aug_mpa_r2_ce1_avg4  # candidate A
 b=p_s_own5  # candidate B
 S05=s05:22  # every series-5 shard complete when B's run started (17:44, twentieth session)
 step=${1:-all}
-point() {  # point NAME: a scaling-curve model copied here from its run (trained first if missing), its risk model
-  local m=$1
+point() {  # point NAME [SCRIPT]: a model copied here from its run (SCRIPT, default the scaling curve's, trains it
+  local m=$1  # first if missing), its risk model beside it
   if [ ! -f "$out/$m.zip" ]; then
-    [ -f "$M/$m.zip" ] || bash results/distill_scaling/run.sh
+    [ -f "$M/$m.zip" ] || bash "${2:-results/distill_scaling/run.sh}"
     cp -p "$M/$m.zip" "$M/$m.distill.json" "$out/"
   fi
   cp -p "$risk" "$out/$m.geometry_risk.pt"
@@ -70,12 +71,18 @@ f=p_s_dagger1383_aug_mpa_r2_ce1_seed1_avg4  # candidate F: the twelfth point's s
 if [[ $step == f || $step == all ]]; then
   point $f
 fi
+g=p_s_dagger594_aug_mpa_r2_ce1_set_avg4  # candidate G: A's run with --teacher-set (twenty-seventh session)
+if [[ $step == g || $step == all ]]; then
+  point $g results/teacher_set/run.sh
+fi
 # Validation: seeds 2000-2002, N = 5, 8, 11. Each validation step (and all, once) evaluates every candidate in one
 # list (cells already played are kept, the shipped policy's copied from results/stricter_filter/val90), so that
 # val90's summary holds them all whichever step ran last; each step then writes its own candidate's pairs.
-if [[ $step == val || $step == valc || $step == vald || $step == vale || $step == valf || $step == all ]]; then
+if [[ $step == val || $step == valc || $step == vald || $step == vale || $step == valf || $step == valg ||
+    $step == all ]]; then
   python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
-      "$out/$d.zip$wrap" "$out/$e.zip$wrap" "$out/$f.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
+      "$out/$d.zip$wrap" "$out/$e.zip$wrap" "$out/$f.zip$wrap" \
+      "$out/$g.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
       --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/stricter_filter/val90
 fi
 pairs() {  # pairs NAME AGAINST...: NAME (wrapped) against each label on the validation scenes
@@ -102,6 +109,9 @@ fi
 if [[ $step == valf || $step == all ]]; then
   pairs $f $old $a$wrap $e$wrap
 fi
+if [[ $step == valg || $step == all ]]; then
+  pairs $g $old $a$wrap
+fi
 candidate="$out/$a.zip$wrap"  # the candidate that passed validation
 new=$a$wrap  # its cells' label
 ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results/models_v3)
@@ -119,8 +129,8 @@ if [[ $step == falls || $step == all ]]; then
   # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
   python -m shelf_env.evaluation.falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
 fi
-# Candidates C, D, E and F on the held-out scenes, only where they passed validation (the page's rules; not part of
-# "all"): each in its own folder ($out/c, $out/d, $out/e, $out/f), every other policy's cells (A's too) copied from this
+# Candidates C to G on the held-out scenes, only where they passed validation (the page's rules; not part of
+# "all"): each in its own folder ($out/c ... $out/g), every other policy's cells (A's too) copied from this
 # folder's open/ and closed_safe/; the candidate against A too.
 held() {  # held open|closed|falls NAME DIR
   local mode=$1 m=$2 dir=$3
@@ -138,7 +148,7 @@ held() {  # held open|closed|falls NAME DIR
       python -m shelf_env.evaluation.falls "$out/$m.zip$wrap" --ns 8 --runs 30 --seed 0 --out "$dir/falls30.json" ;;
   esac
 }
-for x in c d e f; do
+for x in c d e f g; do
   for mode in open closed falls; do
     if [[ $step == "$mode$x" ]]; then
       held $mode "${!x}" "$out/$x"
