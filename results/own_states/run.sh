@@ -77,13 +77,16 @@ if [[ $step == g || $step == all ]]; then
 fi
 # Validation: seeds 2000-2002, N = 5, 8, 11. Each validation step (and all, once) evaluates every candidate in one
 # list (cells already played are kept, the shipped policy's copied from results/stricter_filter/val90), so that
-# val90's summary holds them all whichever step ran last; each step then writes its own candidate's pairs.
+# val90's summary holds them all whichever step ran last; each step then writes its own candidate's pairs. A
+# candidate not made yet (its zip not here: F before its run ends) is left out until it is.
 if [[ $step == val || $step == valc || $step == vald || $step == vale || $step == valf || $step == valg ||
     $step == all ]]; then
-  python -m research.evaluate --policies "$shipped" "$out/$a.zip$wrap" "$out/$b.zip$wrap" "$out/$c.zip$wrap" \
-      "$out/$d.zip$wrap" "$out/$e.zip$wrap" "$out/$f.zip$wrap" \
-      "$out/$g.zip$wrap" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb \
-      --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/stricter_filter/val90
+  made=()
+  for m in $a $b $c $d $e $f $g; do
+    [ -f "$out/$m.zip" ] && made+=("$out/$m.zip$wrap")
+  done
+  python -m research.evaluate --policies "$shipped" "${made[@]}" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 \
+      --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/stricter_filter/val90
 fi
 pairs() {  # pairs NAME AGAINST...: NAME (wrapped) against each label on the validation scenes
   local m=$1

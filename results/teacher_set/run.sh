@@ -4,10 +4,10 @@
 # 0), then model G, the scaling curve's eleventh point with --teacher-set and nothing else changed (plain and averaged
 # from one run, checkpointed each epoch into a resume file here: commit it when a session ends mid-run).
 # Its averaged weights are candidate G under the shipped wrappers: bash results/own_states/run.sh g / valg.
-# Then (diag) both runs' plain and averaged models on the same validation states (the last fifth of the 649 shards'
-# scenes, which neither trained on): the distillation loss with the teacher alone, and how often each greedy action
-# lies in the teacher's square (teacher_near) or a tie's (teacher_set_choice); the soup research/model_soup.py also
-# writes is a by-product, not played.
+# Then (diag) both runs' averaged models (candidates A and G, as committed) on the same validation states (the last
+# fifth of the 649 shards' scenes, which neither trained on): the distillation loss with the teacher alone, and how
+# often each greedy action lies in the teacher's square (teacher_near) or a tie's (teacher_set_choice); the soup
+# research/model_soup.py also writes is a by-product, not played.
 #   bash results/teacher_set/run.sh [ties|g|diag|all]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -29,7 +29,7 @@ if [[ $step == g || $step == all ]]; then
   cp "$M/$g.distill.json" "$M/${g}_avg4.distill.json" "$DIR/"
 fi
 if [[ $step == diag || $step == all ]]; then
-  OMP_NUM_THREADS=2 "$PY" research/model_soup.py $M/p_s_dagger594_aug_mpa_r2_ce1.zip $M/$g.zip \
-    $M/p_s_dagger594_aug_mpa_r2_ce1_avg4.zip $M/${g}_avg4.zip --out "$M/soup_a_g.zip" \
+  OMP_NUM_THREADS=2 "$PY" research/model_soup.py results/own_states/p_s_dagger594_aug_mpa_r2_ce1_avg4.zip \
+    results/own_states/${g}_avg4.zip --out "$M/soup_a_g.zip" \
     --val-shards s00:55,s01:50,s02:205,s03:184,s04:155 --teacher-radius 2 --teacher-temperature 1 > "$DIR/val_states.jsonl"
 fi
