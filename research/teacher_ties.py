@@ -78,8 +78,9 @@ def count_ties(shards: list[dataset.Shard], radius: int = 2) -> Ties:
         tie = (i >= 0) & off[np.maximum(i, 0), labelled.label_action]  # each tie once per label
         out.with_ties += len(np.unique(i[tie]))
         out.ties += int(tie.sum())
-        for k in np.flatnonzero(tie):
-            out.sources[dataset.SOURCES[int(shard.arrays["label_source"][k])]] += 1
+        per_source = np.bincount(shard.arrays["label_source"][tie], minlength=len(dataset.SOURCES))
+        for name, n in zip(dataset.SOURCES, per_source):
+            out.sources[name] += int(n)
     return out
 
 

@@ -231,16 +231,14 @@ def teacher_sets(rows: th.Tensor, label_state: th.Tensor, label_action: th.Tenso
     row_of = th.full((n_states,), -1, dtype=th.long, device=rows.device)
     row_of[rows] = th.arange(len(rows), device=rows.device)
     good = ~invalid & (progress >= bar[label_state]) & (row_of[label_state] >= 0)
-    out = th.zeros((len(rows), n_actions), dtype=th.bool, device=rows.device)
-    if not good.any():
-        return out
-    where, actions = row_of[label_state[good]], label_action[good]
+    actions = label_action[good]
     if radius > 0:
         assert grid is not None
-        cells = near_cells(actions, grid, radius).to(th.float32)
-        return th.zeros((len(rows), n_actions), device=rows.device).index_add_(0, where, cells) > 0
-    out[where, actions] = True
-    return out
+        cells = near_cells(actions, grid, radius)
+    else:
+        cells = F.one_hot(actions, n_actions).bool()
+    counts = th.zeros((len(rows), n_actions), device=rows.device)
+    return counts.index_add_(0, row_of[label_state[good]], cells.to(counts.dtype)) > 0
 
 
 def distillation_loss(q_maps: th.Tensor, label_state: th.Tensor, label_action: th.Tensor, invalid: th.Tensor,
@@ -376,19 +374,20 @@ def evaluate(policy: Any, data: LabelledStates, options: LossOptions = LossOptio
                 greedy = np.where(masks, q_np, -np.inf).argmax(axis=1)
                 agree += int((greedy[has] == sub.teacher_action[has]).sum())
                 taught += int(has.sum())
-                if teacher_radius > 0 and has.any():
-                    close = near_cells(th.as_tensor(sub.teacher_action[has]), q_maps.shape[1:], teacher_radius).numpy()
-                    near += int(close[np.arange(len(close)), greedy[has]].sum())
-                if sub.label_progress is not None and has.any():
+                if has.any():  # the teacher's square (its pixel where the radius is 0), once for both counts
                     rows = np.flatnonzero(has)
                     teacher_t = th.as_tensor(sub.teacher_action)
                     square = (near_cells(teacher_t[rows], q_maps.shape[1:], teacher_radius) if teacher_radius > 0
                               else F.one_hot(teacher_t[rows], q_np.shape[1]).bool())
-                    good = square | teacher_sets(th.as_tensor(rows), th.as_tensor(sub.label_state),
-                                                 th.as_tensor(sub.label_action), th.as_tensor(sub.label_invalid),
-                                                 th.as_tensor(sub.label_progress), teacher_t, q_np.shape[1],
-                                                 q_maps.shape[1:], teacher_radius)
-                    in_set += int(good.numpy()[np.arange(len(rows)), greedy[rows]].sum())
+                    picked = np.arange(len(rows)), greedy[rows]
+                    if teacher_radius > 0:
+                        near += int(square.numpy()[picked].sum())
+                    if sub.label_progress is not None:
+                        good = square | teacher_sets(th.as_tensor(rows), th.as_tensor(sub.label_state),
+                                                     th.as_tensor(sub.label_action), th.as_tensor(sub.label_invalid),
+                                                     th.as_tensor(sub.label_progress), teacher_t, q_np.shape[1],
+                                                     q_maps.shape[1:], teacher_radius)
+                        in_set += int(good.numpy()[picked].sum())
             for s in range(len(states)):
                 rows = np.flatnonzero(sub.label_state == s)
                 if len(rows):
