@@ -12,8 +12,10 @@
 # The twenty-sixth session: candidate E, the scaling curve's twelfth point (averaged weights), as A was (e, vale).
 # The twenty-seventh session: candidate F, the twelfth point's seed-1 replicate (averaged weights), as E (f, valf);
 # candidate G, the eleventh point with a set target for the teacher term (docs/experiments/teacher-set.md; g, valg).
-# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|d|vald|e|vale|f|valf|g|valg|all|openc|
-#   closedc|fallsc|opend|closedd|fallsd|opene|closede|fallse|openf|closedf|fallsf|openg|closedg|fallsg|series]
+# The twenty-eighth session: candidate H, the twelfth point's seed-2 replicate (averaged weights), as F (h, valh).
+# Usage: bash results/own_states/run.sh [a|b|val|open|closed|falls|c|valc|d|vald|e|vale|f|valf|g|valg|h|valh|all|
+#   openc|closedc|fallsc|opend|closedd|fallsd|opene|closede|fallse|openf|closedf|fallsf|openg|closedg|fallsg|openh|
+#   closedh|fallsh|series]
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -75,14 +77,18 @@ g=p_s_dagger594_aug_mpa_r2_ce1_set_avg4  # candidate G: A's run with --teacher-s
 if [[ $step == g || $step == all ]]; then
   point $g results/teacher_set/run.sh
 fi
+h=p_s_dagger1383_aug_mpa_r2_ce1_seed2_avg4  # candidate H: the twelfth point's seed-2 replicate, averaged (28th session)
+if [[ $step == h || $step == all ]]; then
+  point $h
+fi
 # Validation: seeds 2000-2002, N = 5, 8, 11. Each validation step (and all, once) evaluates every candidate in one
 # list (cells already played are kept, the shipped policy's copied from results/stricter_filter/val90), so that
 # val90's summary holds them all whichever step ran last; each step then writes its own candidate's pairs. A
 # candidate not made yet (its zip not here: F before its run ends) is left out until it is.
 if [[ $step == val || $step == valc || $step == vald || $step == vale || $step == valf || $step == valg ||
-    $step == all ]]; then
+    $step == valh || $step == all ]]; then
   made=()
-  for m in $a $b $c $d $e $f $g; do
+  for m in $a $b $c $d $e $f $g $h; do
     [ -f "$out/$m.zip" ] && made+=("$out/$m.zip$wrap")
   done
   python -m research.evaluate --policies "$shipped" "${made[@]}" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 \
@@ -115,6 +121,9 @@ fi
 if [[ $step == valg || $step == all ]]; then
   pairs $g $old $a$wrap
 fi
+if [[ $step == valh || $step == all ]]; then
+  pairs $h $old $a$wrap $e$wrap $f$wrap
+fi
 candidate="$out/$a.zip$wrap"  # the candidate that passed validation
 new=$a$wrap  # its cells' label
 ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results/models_v3)
@@ -132,8 +141,8 @@ if [[ $step == falls || $step == all ]]; then
   # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
   python -m shelf_env.evaluation.falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
 fi
-# Candidates C to G on the held-out scenes, only where they passed validation (the page's rules; not part of
-# "all"): each in its own folder ($out/c ... $out/g), every other policy's cells (A's too) copied from this
+# Candidates C to H on the held-out scenes, only where they passed validation (the page's rules; not part of
+# "all"): each in its own folder ($out/c ... $out/h), every other policy's cells (A's too) copied from this
 # folder's open/ and closed_safe/; the candidate against A too.
 held() {  # held open|closed|falls NAME DIR
   local mode=$1 m=$2 dir=$3
@@ -151,7 +160,7 @@ held() {  # held open|closed|falls NAME DIR
       python -m shelf_env.evaluation.falls "$out/$m.zip$wrap" --ns 8 --runs 30 --seed 0 --out "$dir/falls30.json" ;;
   esac
 }
-for x in c d e f g; do
+for x in c d e f g h; do
   for mode in open closed falls; do
     if [[ $step == "$mode$x" ]]; then
       held $mode "${!x}" "$out/$x"
