@@ -338,10 +338,17 @@ class PickMask:
                deterministic: bool) -> tuple[np.ndarray, Any]:
         """The policy's action with the pick cells ``cells`` (bool ``(H, W)``) masked out of ``allowed``, or within
         ``allowed`` alone where that would leave nothing; counted in ``stats``."""
+        banned = np.zeros((self.n_maps, self.rows, self.cols), bool)
+        banned[self.pick] = cells
+        return self.choose_actions(obs, allowed, banned.reshape(-1), state, deterministic)
+
+    def choose_actions(self, obs: np.ndarray, allowed: np.ndarray, banned: np.ndarray, state: Any,
+                       deterministic: bool) -> tuple[np.ndarray, Any]:
+        """`choose` for any actions: the policy's action with the flat actions ``banned`` masked out of ``allowed``,
+        or within ``allowed`` alone where that would leave nothing; counted in ``stats``."""
         masked, unmasked = self.STATS
-        self.stats[masked] += int((allowed.reshape(self.n_maps, self.rows, self.cols)[self.pick] & cells).any())
-        kept = allowed.copy()
-        kept.reshape(self.n_maps, self.rows, self.cols)[self.pick] &= ~cells
+        self.stats[masked] += int((allowed & banned).any())
+        kept = allowed & ~banned
         if not kept.any():
             self.stats[unmasked] += 1
             kept = allowed

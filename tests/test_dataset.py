@@ -503,3 +503,42 @@ def test_teacher_ties_counts_labels_as_good_as_the_teachers_off_its_square(one_s
     assert ties.ties == int(off.sum()) > 0 and ties.with_ties == 1
     assert sum(ties.sources.values()) == ties.ties
     assert count_ties([shard], radius=100).ties == int((first & (m != tm)).sum())  # a square as large as the map
+
+
+def test_push_guard_stats_count_the_drivers_greedy_actions_by_primitive_and_outcome(one_shard: pathlib.Path,
+                                                                                  tmp_path: pathlib.Path) -> None:
+    from research.push_guard import greedy_stats, sorted_pushes, stats_table
+
+    with np.load(dataset.shard_path(one_shard, 0, 0)) as data:
+        arrays = {k: data[k] for k in data.files}
+    h, w = arrays["obs"].shape[2:]
+    greedy = arrays["label_source"] == dataset.SOURCES.index("greedy")
+    states = np.unique(arrays["label_state"][greedy])
+    assert len(states) == len(arrays["obs"])  # a driver's greedy action is labelled first at every state
+    # the last state's greedy action made a push-left at the same cell (this driver picks at N = 2); every greedy
+    # label valid; picks sort one, pushes unsort one
+    last = int(np.flatnonzero(greedy & (arrays["label_state"] == states[-1]))[0])
+    action = arrays["label_action"].copy()
+    action[last] = action[last] % (h * w) + h * w
+    arrays["label_action"] = action
+    is_pick = arrays["label_action"] // (h * w) == 0
+    arrays = {**arrays, "label_valid": np.ones_like(arrays["label_valid"]),
+              "label_fell": np.zeros_like(arrays["label_fell"]),
+              "label_dsorted": np.where(is_pick, 1, -1).astype(arrays["label_dsorted"].dtype)}
+    np.savez_compressed(tmp_path / "s07_00000.npz", **arrays)
+    counts = greedy_stats(tmp_path, "s07")
+    picks, pushes = int((greedy & is_pick).sum()), int((greedy & ~is_pick).sum())
+    assert (counts["pick"], counts.get("push", 0)) == (picks, pushes) and picks > 0 and pushes > 0
+    assert counts["pick_sorted"] == picks and counts.get("pick_fell", 0) == 0
+    assert counts.get("push_unsorted", 0) == pushes and counts.get("push_sorted", 0) == 0
+    names = tuple(dataset.load_shard(tmp_path / "s07_00000.npz").meta["layout"]["map_names"])
+    guarded = sum(bool(sorted_pushes(arrays["obs"][s], names)[a]) for s, a in
+                  zip(arrays["label_state"][greedy & ~is_pick], arrays["label_action"][greedy & ~is_pick]))
+    assert counts.get("push_guarded", 0) == guarded and counts.get("push_free", 0) == pushes - guarded
+    # a push state has a good pick wherever a labelled pick there is valid (all are) and sorts one (all do)
+    push_states = arrays["label_state"][greedy & ~is_pick]
+    assert counts.get("push_state_good_pick", 0) == sum(bool((is_pick & (arrays["label_state"] == s)).any())
+                                                        for s in push_states)
+    assert f"{len(states)} states" in stats_table(counts, "s07")
+    with pytest.raises(ValueError, match="no shards of series 's08'"):
+        greedy_stats(tmp_path, "s08")

@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# The push guard (docs/experiments/push-guard.md): the shipped P+S with and without a guard against wasted pushes
+# (research.push_guard), innermost under its filter, pick guard and loop breaker. First what the shipped policy's
+# greedy pushes did in series 5 of the teacher dataset (training scenes); then candidates P (+push-guard: no pushes
+# into objects that look sorted) and Q (+pick-first: no pushes while a pick is allowed) on the validation scenes;
+# then the candidate the page's rule picks on issue 10's held-out scenes: the open-loop grid, closed loop + safe
+# picks, its greedy fall rate at N = 8. The shipped policy's cells are copied (by label and digest) from where they
+# were played.
+# Usage: bash results/push_guard/run.sh [stats|val|all]   |   bash results/push_guard/run.sh open|closed|falls p|q
+#   (WORKERS=2 for two processes)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+. results/heldout.sh
+out=results/push_guard
+geo=results/fall_geometry/filter/p_s_geo10.zip  # the shipped p_s.zip + its geometry risk, the label they were played as
+wrap=+geometry-filter+pick-guard+loop-breaker
+shipped="$geo$wrap"
+old=p_s_geo10$wrap  # the shipped policy's cells' label
+p="$geo+push-guard$wrap"  # candidate P
+q="$geo+pick-first$wrap"  # candidate Q
+ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results/models_v3)
+others=("$ref=examples/pretrained/p_s.zip" examples/pretrained/s.zip h-d h-a)
+step=${1:-all}
+if [[ $step == stats || $step == all ]]; then
+  python -m research.push_guard stats data/teacher --series s05 --out $out/series5.md
+fi
+if [[ $step == val || $step == all ]]; then
+  # 1. validation: seeds 2000-2002, N = 5, 8, 11; the shipped policy's cells from results/stricter_filter/val90
+  python -m research.evaluate --policies "$shipped" "$p" "$q" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 \
+      --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/stricter_filter/val90
+  for c in push-guard pick-first; do
+    python -m shelf_env.evaluation.compare "$out/val90" --pair "p_s_geo10+$c$wrap" $old \
+        --out "$out/val90_pairs_$c.md"
+  done
+fi
+if [[ $step == open || $step == closed || $step == falls ]]; then
+  case ${2:-} in
+    p) candidate=$p; new=p_s_geo10+push-guard$wrap ;;
+    q) candidate=$q; new=p_s_geo10+pick-first$wrap ;;
+    *) echo "run.sh $step: name the candidate that passed validation, p or q" >&2; exit 2 ;;
+  esac
+fi
+if [[ $step == open ]]; then
+  # 2. held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
+  heldout open $out "$candidate" "$new" $old $ref results/pick_guard/open "$shipped" "${others[@]}"
+fi
+if [[ $step == closed ]]; then
+  # 3. held-out, closed loop + safe picks: seed 0, N = 3..14
+  heldout closed $out "$candidate" "$new" $old $ref results/pick_guard/closed_safe "$shipped" \
+      "$ref=examples/pretrained/p_s.zip" h-d h-a
+fi
+if [[ $step == falls ]]; then
+  # 4. the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
+  python -m research.push_guard falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
+fi
