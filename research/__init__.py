@@ -2,3 +2,17 @@
 ``sb3_pixeldqn``); the product never imports them. Not installed: run from the repository root
 (``python -m research.<module>``). Their pages are in docs/experiments/.
 """
+
+from __future__ import annotations
+
+import pathlib
+
+from shelf_env.files import write_text_atomically
+
+
+def print_or_write(text: str, out: pathlib.Path | None) -> None:
+    """An experiment's table or page: printed where ``out`` is None, else written to ``out`` atomically."""
+    if out is None:
+        print(text, end="" if text.endswith("\n") else "\n")
+    else:
+        write_text_atomically(out, text)

@@ -32,11 +32,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from research import print_or_write
 from shelf_env import params
 from shelf_env.actions import occupancy_masks
 from shelf_env.baselines.heuristics import ObservationView
 from shelf_env.fall_filter import PickMask
-from shelf_env.files import write_text_atomically
 from shelf_env.policies import register_wrapper
 from shelf_env.privileged import dataset
 
@@ -176,10 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    if args.out is None:
-        print(table, end="")
-    else:
-        write_text_atomically(args.out, table)
+    print_or_write(table, args.out)
     return 0
 
 

@@ -18,7 +18,7 @@ import sys
 
 import numpy as np
 
-from shelf_env.files import write_text_atomically
+from research import print_or_write
 from shelf_env.privileged import dataset
 
 
@@ -59,10 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    if args.out is None:
-        print(table, end="")
-    else:
-        write_text_atomically(args.out, table)
+    print_or_write(table, args.out)
     return 0
 
 

@@ -24,8 +24,8 @@ from typing import cast
 import numpy as np
 import torch as th
 
+from research import print_or_write
 from sb3_pixeldqn.distill import near_cells, teacher_sets
-from shelf_env.files import write_text_atomically
 from shelf_env.privileged import dataset
 
 
@@ -107,10 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     draw = sorted(np.random.default_rng(args.seed).choice(len(files), min(args.shards, len(files)), replace=False))
     counts = count_ties([dataset.load_shard(files[i]) for i in draw], args.radius)
     page = counts.table(len(draw), len(files), args.seed, args.radius)
-    if args.out is None:
-        print(page)
-    else:
-        write_text_atomically(args.out, page)
+    print_or_write(page, args.out)
     return 0
 
 

@@ -75,3 +75,13 @@ def test_bad_input_and_the_registry():
     assert policies.policy_wrappers("m.zip+push-guard+geometry-filter+pick-guard+loop-breaker") == (
         "m.zip", ("+push-guard", "+geometry-filter", "+pick-guard", "+loop-breaker"))
     assert policies.policy_wrappers("m.zip+pick-first+loop-breaker") == ("m.zip", ("+pick-first", "+loop-breaker"))
+
+
+def test_print_or_write_prints_one_newline_or_writes_the_file(tmp_path, capsys):
+    from research import print_or_write
+
+    print_or_write("a table\n", None)
+    print_or_write("a page", None)
+    assert capsys.readouterr().out == "a table\na page\n"
+    print_or_write("a table\n", tmp_path / "t.md")
+    assert (tmp_path / "t.md").read_text() == "a table\n" and capsys.readouterr().out == ""
