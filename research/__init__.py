@@ -6,6 +6,8 @@
 from __future__ import annotations
 
 import pathlib
+import sys
+from collections.abc import Callable
 
 from shelf_env.files import write_text_atomically
 
@@ -16,3 +18,15 @@ def print_or_write(text: str, out: pathlib.Path | None) -> None:
         print(text, end="" if text.endswith("\n") else "\n")
     else:
         write_text_atomically(out, text)
+
+
+def table_command(make: Callable[[], str], out: pathlib.Path | None) -> int:
+    """An experiment CLI's body: the text ``make`` returns, printed or written (`print_or_write`); a `ValueError` it
+    raises is one ``error:`` line on stderr and exit status 2, with nothing written."""
+    try:
+        text = make()
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print_or_write(text, out)
+    return 0

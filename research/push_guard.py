@@ -32,7 +32,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from research import print_or_write
+from research import table_command
 from shelf_env import params
 from shelf_env.actions import occupancy_masks
 from shelf_env.baselines.heuristics import ObservationView
@@ -76,8 +76,9 @@ class PushGuard(PickMask):
         if self.mode == "sorted":
             return sorted_pushes(obs, self.map_names)
         out = np.zeros((self.n_maps, self.rows * self.cols), bool)
-        if allowed.reshape(self.n_maps, -1)[self.pick].any():
-            out[[m for m in range(self.n_maps) if m != self.pick]] = True
+        if allowed.reshape(self.n_maps, -1)[self.pick].any():  # every push map
+            out[:] = True
+            out[self.pick] = False
         return out.reshape(-1)
 
     def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
@@ -171,13 +172,7 @@ def main(argv: list[str] | None = None) -> int:
 
         return falls.main(argv[1:])
     args = parser.parse_args(argv)
-    try:
-        table = stats_table(greedy_stats(args.data, args.series), args.series)
-    except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    print_or_write(table, args.out)
-    return 0
+    return table_command(lambda: stats_table(greedy_stats(args.data, args.series), args.series), args.out)
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ import sys
 
 import numpy as np
 
-from research import print_or_write
+from research import table_command
 from shelf_env.privileged import dataset
 
 
@@ -54,13 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("data", type=pathlib.Path, help="the dataset folder")
     parser.add_argument("--out", type=pathlib.Path, help="write the table here (else print it)")
     args = parser.parse_args(argv)
-    try:
-        table = series_table(args.data)
-    except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    print_or_write(table, args.out)
-    return 0
+    return table_command(lambda: series_table(args.data), args.out)
 
 
 if __name__ == "__main__":

@@ -85,3 +85,16 @@ def test_print_or_write_prints_one_newline_or_writes_the_file(tmp_path, capsys):
     assert capsys.readouterr().out == "a table\na page\n"
     print_or_write("a table\n", tmp_path / "t.md")
     assert (tmp_path / "t.md").read_text() == "a table\n" and capsys.readouterr().out == ""
+
+
+def test_table_command_prints_writes_or_refuses(tmp_path, capsys):
+    from research import table_command
+
+    assert table_command(lambda: "a table\n", None) == 0 and capsys.readouterr().out == "a table\n"
+    assert table_command(lambda: "a table\n", tmp_path / "t.md") == 0 and (tmp_path / "t.md").read_text() == "a table\n"
+
+    def bad() -> str:
+        raise ValueError("no shards of series 's09'")
+
+    assert table_command(bad, tmp_path / "u.md") == 2 and not (tmp_path / "u.md").exists()
+    assert capsys.readouterr().err == "error: no shards of series 's09'\n"
