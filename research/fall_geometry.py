@@ -65,19 +65,29 @@ class Sets:
     test: fall_risk.Split | None
 
 
-def load_sets(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None = None) -> Sets:
+def load_sets(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None = None,
+              fresh_after: str | None = None) -> Sets:
     """`Sets` of the teacher dataset ``data``: the split of `research.fall_risk.load_splits` (``max_shards``,
     ``val_fraction``), the scene of each validation state (the two-fold split of `twofold` keeps a scene's
-    states together) and, with ``fresh``, the test set."""
+    states together) and, with ``fresh``, the test set (`fresh_split`: ``fresh``'s shards that ``fresh_after``,
+    by default ``max_shards``, leaves out). The test set's shards are left out of the training and validation
+    splits, so that a refit on a grown dataset can keep an older test set that sits inside ``max_shards``."""
     from shelf_env.privileged import dataset
     if not 0 < val_fraction < 1:
         raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
+    if fresh_after is not None and fresh is None:
+        raise ValueError("--fresh-after names what a test set comes after; give the test set with --fresh")
     every = dataset.load_dataset(data)
-    shards = dataset.select_shards(every, max_shards)
+    test = None if fresh is None else _fresh_shards(every, max_shards if fresh_after is None else fresh_after,
+                                                    fresh)
+    left_out = {s.path.name for s in test or []}
+    shards = [s for s in dataset.select_shards(every, max_shards) if s.path.name not in left_out]
+    if not shards:
+        raise ValueError(f"--max-shards {max_shards} selects no shard outside the test set --fresh {fresh}")
     train, val, val_index = fall_risk.split_teacher_shards(shards, val_fraction, name=str(data))
     scene = np.concatenate([shard.arrays["state_episode"].astype(np.int64) + 1000 * k
                             for k, shard in enumerate(shards)])
-    return Sets(train, val, scene[val_index], None if fresh is None else _fresh(every, max_shards, fresh))
+    return Sets(train, val, scene[val_index], None if test is None else _whole(test))
 
 
 def fresh_split(data: pathlib.Path, used: str | None, fresh: str) -> fall_risk.Split:
@@ -85,17 +95,21 @@ def fresh_split(data: pathlib.Path, used: str | None, fresh: str) -> fall_risk.S
     (the fall model's ``--max-shards``) does not: a test set no fall model trained on."""
     from shelf_env.privileged import dataset
 
-    return _fresh(dataset.load_dataset(data), used, fresh)
+    return _whole(_fresh_shards(dataset.load_dataset(data), used, fresh))
 
 
-def _fresh(shards: list[Any], used: str | None, fresh: str) -> fall_risk.Split:
+def _fresh_shards(shards: list[Any], used: str | None, fresh: str) -> list[Any]:
     from shelf_env.privileged import dataset
 
     taken = {s.path.name for s in dataset.select_shards(shards, used)}
     chosen = [s for s in dataset.select_shards(shards, fresh) if s.path.name not in taken]
     if not chosen:
-        raise ValueError(f"--fresh {fresh} selects no shard that --max-shards {used} leaves out")
-    return fall_risk.teacher_split(chosen, np.arange(sum(s.num_states for s in chosen)))
+        raise ValueError(f"--fresh {fresh} selects no shard that {used} leaves out")
+    return chosen
+
+
+def _whole(shards: list[Any]) -> fall_risk.Split:
+    return fall_risk.teacher_split(shards, np.arange(sum(s.num_states for s in shards)))
 
 
 def build(sets: Sets, out: pathlib.Path, blockers: bool = False) -> dict[str, Any]:
@@ -267,6 +281,31 @@ def report(features: pathlib.Path, fcn_risk: np.ndarray | None, epochs: int = 20
     return out, models, risks, test
 
 
+def compare_risk(features: pathlib.Path, risk_path: pathlib.Path, models: dict[str, FeatureModel]
+                 ) -> dict[str, Any]:
+    """An exported `GeometryRisk` (``risk_path``, e.g. the shipped filter's) beside a refit's models on the same
+    labels of a `build` file: each one's AUC on validation and test, and at the exported risk's threshold the
+    share of pick labels masked and the invalid share of those allowed (a refit's threshold means what the
+    exported one's did only if these match)."""
+    z, names = load_features(features)
+    exported = GeometryRisk.load(risk_path)
+    if len(exported.model.mean) != len(names) or exported.blockers != (names == feature_names(True)):
+        raise ValueError(f"{risk_path} reads {len(exported.model.mean)} features, {features} holds {len(names)}")
+    scored = {"exported": exported.model, **models}
+    out: dict[str, Any] = {"path": str(risk_path), "threshold": exported.threshold}
+    for part in ("val", "test"):
+        if f"{part}_x" not in z.files:
+            continue
+        x, y = z[f"{part}_x"], z[f"{part}_y"].astype(bool)
+        for name, model in scored.items():
+            risk = model.risk(x)
+            allowed = risk < exported.threshold
+            out.setdefault(name, {})[part] = {
+                "auc": fall_risk.auc(y.astype(np.float64), risk), "masked": float(1 - allowed.mean()),
+                "allowed_invalid": float(y[allowed].mean()) if allowed.any() else float("nan")}
+    return out
+
+
 def reading(result: dict[str, Any], bar: float = 0.886) -> str:
     """The plan's reading of a `report` (docs/experiments/fall-geometry.md)."""
     f = result["mlp"]["val_auc"]
@@ -385,6 +424,9 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--val-fraction", type=float, default=0.2)
         p.add_argument("--fresh", default=None,
                        help="a test set: the shards this --max-shards spec selects that --max-shards leaves out")
+        p.add_argument("--fresh-after", default=None,
+                       help="the shards the test set comes after (a --max-shards spec; default --max-shards): "
+                            "--fresh's shards that it leaves out are the test set, and they leave the split")
         p.add_argument("--out", type=pathlib.Path, required=True)
         if name == "features":
             p.add_argument("--blockers", action="store_true", help="round two's blocker features too")
@@ -401,6 +443,8 @@ def main(argv: list[str] | None = None) -> int:
             p.add_argument("--epochs", type=int, default=20)
             p.add_argument("--checkpoint", default=None,
                            help="with it, the offline check (research.fall_risk.penalty_report) of each risk")
+            p.add_argument("--compare", type=pathlib.Path, default=None,
+                           help="an exported geometry risk (.geometry_risk.pt) scored beside the fit (compare_risk)")
     e = sub.add_parser("export", help="a fit's model as a GeometryRisk (<stem>.geometry_risk.pt for a filter)")
     e.add_argument("--models", type=pathlib.Path, required=True, help="a fit run's .models.pt")
     e.add_argument("--name", default="mlp", help="which of its models (mlp, logistic)")
@@ -420,13 +464,16 @@ def main(argv: list[str] | None = None) -> int:
                               "blockers": exported.blockers}))
             return 0
         if args.command == "features":
-            print(json.dumps(build(load_sets(args.data, args.val_fraction, args.max_shards, args.fresh), args.out,
-                                   args.blockers)))
+            sets = load_sets(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after)
+            print(json.dumps(build(sets, args.out, args.blockers)))
             return 0
         if not args.features.is_file():
             raise ValueError(f"{args.features} does not exist; make it with `features`")
+        if getattr(args, "compare", None) is not None and not args.compare.is_file():
+            raise ValueError(f"--compare {args.compare} does not exist")
         needs_data = args.command == "channels" or args.fall_model is not None or args.checkpoint is not None
-        sets = load_sets(args.data, args.val_fraction, args.max_shards, args.fresh) if needs_data else None
+        sets = (load_sets(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after) if needs_data
+                else None)
         if args.command == "channels":
             assert sets is not None
             result = channels_run(sets, args.features, args.out, args.checkpoint, args.epochs, args.fall_model,
@@ -439,6 +486,7 @@ def main(argv: list[str] | None = None) -> int:
                            else (None, None))
         result, models, risks, test = report(args.features, risk, args.epochs, fcn_test_risk=test_risk)
         result |= {"max_shards": args.max_shards, "val_fraction": args.val_fraction, "fresh": args.fresh,
+                   "fresh_after": args.fresh_after,
                    "fall_model": str(args.fall_model) if args.fall_model else None, "reading": reading(result)}
         if sets is not None and args.checkpoint is not None:
             keep = ("mlp", "joint", "ensemble")
@@ -446,6 +494,8 @@ def main(argv: list[str] | None = None) -> int:
             if test and sets.test is not None:
                 result["test_offline"] = offline(args.checkpoint, sets.test,
                                                  {k: v for k, v in test.items() if k in keep + ("fcn",)})
+        if args.compare is not None:
+            result["compare"] = compare_risk(args.features, args.compare, models)
         write_json_atomically(args.out, result)
         weights = {name: m.state_dict() for name, m in models.items()}
         write_atomically(args.out.with_suffix(".models.pt"), lambda tmp: th.save(weights, tmp))

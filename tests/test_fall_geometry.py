@@ -198,6 +198,20 @@ def test_the_geometry_risk_scores_every_object_cell_as_the_fit_did_and_filters_a
     pick_cells = action < 20 * 30
     assert not pick_cells or per_cell.reshape(-1)[action] < 0.5  # a pick it plays is one the filter keeps
     env.close()
+    # --compare: the exported risk beside a refit on the same labels; the same seed refits the same model, so
+    # the two agree exactly, and the masked share is the share of labels at or over the exported threshold
+    fit_args = ["fit", *args, "--features", str(tmp_path / "f.npz"), "--epochs", "5", "--out", str(tmp_path / "r.json")]
+    assert fg.main([*fit_args, "--compare", str(tmp_path / "none.pt")]) == 2
+    assert "--compare" in capsys.readouterr().err and not (tmp_path / "r.json").exists()
+    assert fg.main([*fit_args, "--compare", str(geometry_risk_path(zip_path))]) == 0
+    compared = json.loads((tmp_path / "r.json").read_text())["compare"]
+    assert compared["threshold"] == 0.5 and set(compared) == {"path", "threshold", "exported", "mlp", "logistic"}
+    assert compared["exported"]["val"] == compared["mlp"]["val"]
+    assert compared["exported"]["val"]["masked"] == pytest.approx(float((expected >= 0.5).mean()))
+    with np.load(tmp_path / "f.npz") as z:
+        labels = z["val_y"].astype(bool)
+    assert compared["exported"]["val"]["allowed_invalid"] == pytest.approx(float(labels[expected < 0.5].mean()))
+    assert compared["exported"]["val"]["auc"] == pytest.approx(fr.auc(labels.astype(float), expected))
 
 
 def test_the_two_fold_risks_do_not_depend_on_what_ran_before():
@@ -210,3 +224,36 @@ def test_the_two_fold_risks_do_not_depend_on_what_ran_before():
     th.rand(5)  # the global generator moved on
     assert np.array_equal(fg.twofold(x, y, scenes, hidden=8, epochs=150), first)
     assert fr.auc(y, first) > 0.9  # each fold learns the rule from the other fold's scenes
+
+
+def test_a_test_set_inside_the_pool_leaves_the_split(tmp_path, capsys):
+    """A refit on a grown dataset keeps an older test set: ``--fresh-after`` names what the test set came after,
+    so the test set may sit inside ``--max-shards``; its shards then leave the training and validation splits."""
+    from shelf_env.privileged import dataset
+
+    data = tmp_path / "data"
+    corridor_shards(data, shards=4)
+    sets = fg.load_sets(data, 0.25, "s00:4", fresh="s00:2", fresh_after="s00:1")
+    test = fg.fresh_split(data, "s00:1", "s00:2")  # the second shard, every state
+    assert sets.test is not None and th_equal(sets.test.obs, test.obs) and len(test.obs) == 8 * 5
+    every = dataset.load_dataset(data)
+    pool = [every[0], every[2], every[3]]  # the pool without the test shard: its split, as a fit without a test set
+    train, val, _ = fr.split_teacher_shards(pool, 0.25)
+    assert th_equal(sets.train.obs, train.obs) and th_equal(sets.val.obs, val.obs)
+    assert len(sets.train.obs) + len(sets.val.obs) == 3 * 8 * 5
+    # without --fresh-after the test set comes after --max-shards, as before; so no shard of s00:4 is fresh
+    with pytest.raises(ValueError, match="selects no shard that s00:4 leaves out"):
+        fg.load_sets(data, 0.25, "s00:4", fresh="s00:2")
+    args = ["features", "--data", str(data), "--max-shards", "s00:4", "--val-fraction", "0.25", "--out",
+            str(tmp_path / "f.npz")]
+    assert fg.main([*args, "--fresh-after", "s00:1"]) == 2
+    assert "--fresh-after names what a test set comes after" in capsys.readouterr().err
+    assert fg.main([*args, "--fresh", "s00:4", "--fresh-after", "s00:0"]) == 2  # every shard would be the test set
+    assert "selects no shard outside the test set" in capsys.readouterr().err and not (tmp_path / "f.npz").exists()
+    assert fg.main([*args, "--fresh", "s00:2", "--fresh-after", "s00:1"]) == 0
+    built = json.loads(capsys.readouterr().out)
+    assert built["test_labels"] == len(test.label) and built["train_labels"] == len(train.label)
+
+
+def th_equal(a, b) -> bool:
+    return a.shape == b.shape and bool((a == b).all())

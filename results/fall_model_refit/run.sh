@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# The geometry fall model refit on the grown teacher dataset (docs/experiments/fall-model-refit.md): round two's
+# features and MLP recipe (results/fall_geometry) on every shard of the dataset at this experiment's start except
+# round two's test set, which stays the test set; the refit beside the shipped geometry risk on the same validation
+# and test labels; then, by the page's rule, the refit as the shipped policy's filter at the shipped threshold 0.1
+# on the validation scenes, and on issue 10's held-out scenes if it passes there.
+# Usage: bash results/fall_model_refit/run.sh [features|fit|export|val|all]   |   bash .../run.sh open|closed|falls
+#   (WORKERS=2 for two processes)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+. results/heldout.sh
+export OMP_NUM_THREADS=1
+out=results/fall_model_refit
+pool=s00:55,s01:50,s02:205,s03:638,s04:172,s05:457  # the dataset when this experiment started (1,577 shards)
+fresh=s03:95,s04:59  # round two's test set: the shards of these ...
+after=s00:55,s01:50,s02:205,s03:54,s04:10  # ... that the fall model's 374 shards leave out (s03_00054-94, s04_00010-58)
+shipped_risk=examples/pretrained/p_s.geometry_risk.pt  # round two's MLP at 0.1, the shipped filter's
+geo=results/fall_geometry/filter/p_s_geo10.zip  # the shipped p_s.zip + its geometry risk, the label it was played as
+wrap=+geometry-filter+pick-guard+loop-breaker
+shipped="$geo$wrap"
+old=p_s_geo10$wrap  # the shipped policy's cells' label
+candidate="$out/p_s_georefit.zip$wrap"
+new=p_s_georefit$wrap
+ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results/models_v3)
+others=("$ref=examples/pretrained/p_s.zip" examples/pretrained/s.zip h-d h-a)
+split=(--data data/teacher --max-shards "$pool" --val-fraction 0.2 --fresh "$fresh" --fresh-after "$after")
+step=${1:-all}
+if [[ $step == features || $step == all ]]; then
+  [ -f "$out/features.npz" ] || python -m research.fall_geometry features "${split[@]}" --blockers \
+      --out "$out/features.npz"
+fi
+if [[ $step == fit || $step == all ]]; then
+  [ -f "$out/fit.json" ] || python -m research.fall_geometry fit "${split[@]}" --features "$out/features.npz" \
+      --compare "$shipped_risk" --out "$out/fit.json"
+fi
+if [[ $step == export || $step == all ]]; then
+  cp -p examples/pretrained/p_s.zip "$out/p_s_georefit.zip"
+  [ -f "$out/p_s_georefit.geometry_risk.pt" ] || python -m research.fall_geometry export --models "$out/fit.models.pt" \
+      --name mlp --features "$out/features.npz" --threshold 0.1 --out "$out/p_s_georefit.geometry_risk.pt"
+fi
+if [[ $step == val || $step == all ]]; then
+  # validation: seeds 2000-2002, N = 5, 8, 11; the shipped policy's cells from results/push_guard/val90
+  python -m research.evaluate --policies "$shipped" "$candidate" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 \
+      --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/push_guard/val90
+  python -m shelf_env.evaluation.compare "$out/val90" --pair "$new" $old --out "$out/val90_pairs.md"
+fi
+if [[ $step == open ]]; then
+  # held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
+  heldout open $out "$candidate" "$new" $old $ref results/pick_guard/open "$shipped" "${others[@]}"
+fi
+if [[ $step == closed ]]; then
+  # held-out, closed loop + safe picks: seed 0, N = 3..14
+  heldout closed $out "$candidate" "$new" $old $ref results/pick_guard/closed_safe "$shipped" \
+      "$ref=examples/pretrained/p_s.zip" h-d h-a
+fi
+if [[ $step == falls ]]; then
+  # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
+  python -m research.push_guard falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
+fi
