@@ -72,9 +72,20 @@ def load_sets(data: pathlib.Path, val_fraction: float, max_shards: str | None, f
     states together) and, with ``fresh``, the test set (`fresh_split`: ``fresh``'s shards that ``fresh_after``,
     by default ``max_shards``, leaves out). The test set's shards are left out of the training and validation
     splits, so that a refit on a grown dataset can keep an older test set that sits inside ``max_shards``."""
-    from shelf_env.privileged import dataset
     if not 0 < val_fraction < 1:
         raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
+    shards, test = _pool(data, max_shards, fresh, fresh_after)
+    train, val, val_index = fall_risk.split_teacher_shards(shards, val_fraction, name=str(data))
+    scene = np.concatenate([shard.arrays["state_episode"].astype(np.int64) + 1000 * k
+                            for k, shard in enumerate(shards)])
+    return Sets(train, val, scene[val_index], None if test is None else _whole(test))
+
+
+def _pool(data: pathlib.Path, max_shards: str | None, fresh: str | None, fresh_after: str | None
+          ) -> tuple[list[Any], list[Any] | None]:
+    """The shards a split is drawn from (``max_shards`` without the test set's) and the test set's shards."""
+    from shelf_env.privileged import dataset
+
     if fresh_after is not None and fresh is None:
         raise ValueError("--fresh-after names what a test set comes after; give the test set with --fresh")
     every = dataset.load_dataset(data)
@@ -84,10 +95,60 @@ def load_sets(data: pathlib.Path, val_fraction: float, max_shards: str | None, f
     shards = [s for s in dataset.select_shards(every, max_shards) if s.path.name not in left_out]
     if not shards:
         raise ValueError(f"--max-shards {max_shards} selects no shard outside the test set --fresh {fresh}")
-    train, val, val_index = fall_risk.split_teacher_shards(shards, val_fraction, name=str(data))
-    scene = np.concatenate([shard.arrays["state_episode"].astype(np.int64) + 1000 * k
-                            for k, shard in enumerate(shards)])
-    return Sets(train, val, scene[val_index], None if test is None else _whole(test))
+    return shards, test
+
+
+def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None,
+                  fresh_after: str | None, series: str, risks: dict[str, pathlib.Path],
+                  bands: tuple[float, ...] = (0.02, 0.05, 0.1)) -> dict[str, Any]:
+    """How exported `GeometryRisk` models (``risks``: name -> file) rank the picks a driving policy made: the
+    greedy picks (label source ``greedy``) of ``series``' states in the validation split of `load_sets`, and, for
+    contrast, every other labelled pick of the same states. Per risk and set: the AUC, the invalid share and count
+    per band of the risk (edges ``bands``), and the share of the invalid picks at or over each risk's threshold."""
+    from shelf_env.training.distill import split_by_scene
+
+    if not 0 < val_fraction < 1:
+        raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
+    models = {name: GeometryRisk.load(path) for name, path in risks.items()}
+    shards, _ = _pool(data, max_shards, fresh, fresh_after)
+    _, val = split_by_scene(shards, val_fraction)
+    first = np.cumsum([0] + [s.num_states for s in shards])
+    mine = [k for k, s in enumerate(shards) if s.path.name.startswith(series + "_")]
+    if not mine:
+        raise ValueError(f"no shard of series {series!r} among --max-shards {max_shards}")
+    index = np.array(val)
+    own = [index[(index >= first[k]) & (index < first[k + 1])] - first[k] for k in mine]
+    chosen = [shards[k] for k in mine]
+    states = np.concatenate([o + offset for o, offset in zip(own, np.cumsum([0] + [s.num_states for s in chosen]))])
+    if len(states) == 0:
+        raise ValueError(f"series {series} has no state in the validation split")
+    picks = {"greedy": fall_risk.teacher_split(chosen, states, source="greedy")}
+    every = fall_risk.teacher_split(chosen, states)
+    picks["others"] = _without(every, picks["greedy"])
+    out: dict[str, Any] = {"series": series, "states": int(len(states)), "bands": list(bands)}
+    edges = np.array((0.0, *bands, np.inf))
+    for set_name, split in picks.items():
+        y = split.label.numpy().astype(bool)
+        entry: dict[str, Any] = {"picks": int(len(y)), "invalid": float(y.mean()) if len(y) else float("nan")}
+        for name, risk in models.items():
+            need = bool(risk.blockers)
+            r = risk.model.risk(split_features(split, need))
+            band = np.digitize(r, edges[1:-1])
+            entry[name] = {"auc": fall_risk.auc(y.astype(np.float64), r) if 0 < y.sum() < len(y) else float("nan"),
+                           "bands": [{"picks": int((band == b).sum()), "invalid": int(y[band == b].sum())}
+                                     for b in range(len(edges) - 1)],
+                           "invalid_over_threshold": float((r[y] >= risk.threshold).mean()) if y.any() else 0.0,
+                           "masked_at_threshold": float((r >= risk.threshold).mean()) if len(r) else 0.0}
+        out[set_name] = entry
+    return out
+
+
+def _without(split: fall_risk.Split, part: fall_risk.Split) -> fall_risk.Split:
+    """``split``'s labels that are not in ``part`` (the same states; a label is its state and cell)."""
+    key = split.state.numpy() * 10**7 + split.cell.numpy()
+    drop = np.isin(key, part.state.numpy() * 10**7 + part.cell.numpy())
+    keep = th.as_tensor(~drop)
+    return fall_risk.Split(split.obs, split.state[keep], split.cell[keep], split.label[keep], split.objects, None)
 
 
 def fresh_split(data: pathlib.Path, used: str | None, fresh: str) -> fall_risk.Split:
@@ -445,6 +506,16 @@ def main(argv: list[str] | None = None) -> int:
                            help="with it, the offline check (research.fall_risk.penalty_report) of each risk")
             p.add_argument("--compare", type=pathlib.Path, default=None,
                            help="an exported geometry risk (.geometry_risk.pt) scored beside the fit (compare_risk)")
+    g = sub.add_parser("greedy", help="exported risks on the picks a driving policy made (greedy_report)")
+    g.add_argument("--data", type=pathlib.Path, required=True)
+    g.add_argument("--max-shards", default=None)
+    g.add_argument("--val-fraction", type=float, default=0.2)
+    g.add_argument("--fresh", default=None, help="the test set left out of the split (as `features`)")
+    g.add_argument("--fresh-after", default=None, help="as `features`")
+    g.add_argument("--series", required=True, help="the series whose greedy picks are read (s05)")
+    g.add_argument("--risk", action="append", required=True, metavar="NAME=PATH",
+                   help="an exported geometry risk (.geometry_risk.pt), repeatable")
+    g.add_argument("--out", type=pathlib.Path, required=True, help="the report (JSON)")
     e = sub.add_parser("export", help="a fit's model as a GeometryRisk (<stem>.geometry_risk.pt for a filter)")
     e.add_argument("--models", type=pathlib.Path, required=True, help="a fit run's .models.pt")
     e.add_argument("--name", default="mlp", help="which of its models (mlp, logistic)")
@@ -462,6 +533,21 @@ def main(argv: list[str] | None = None) -> int:
             exported = export(args.models, args.name, args.features, args.threshold, shape, args.out)
             print(json.dumps({"out": str(args.out), "threshold": exported.threshold, "hidden": exported.hidden,
                               "blockers": exported.blockers}))
+            return 0
+        if args.command == "greedy":
+            risks = {}
+            for item in args.risk:
+                name, sep, path = item.partition("=")
+                if not sep or not name or not path:
+                    raise ValueError(f"--risk takes NAME=PATH, got {item!r}")
+                if not pathlib.Path(path).is_file():
+                    raise ValueError(f"--risk {item}: {path} does not exist")
+                risks[name] = pathlib.Path(path)
+            result = greedy_report(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after,
+                                   args.series, risks)
+            write_json_atomically(args.out, result)
+            print(json.dumps({k: {n: v[n]["auc"] for n in risks} | {"picks": v["picks"], "invalid": v["invalid"]}
+                              for k, v in result.items() if k in ("greedy", "others")}))
             return 0
         if args.command == "features":
             sets = load_sets(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after)

@@ -319,11 +319,16 @@ def make_split(episodes: list[dict[str, np.ndarray]]) -> Split:
     return Split(th.cat(obs), th.cat(state), th.cat(cell), th.cat(label))
 
 
-def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
+def teacher_split(shards: list[Any], states: np.ndarray, source: str | None = None) -> Split:
     """The pick labels of the teacher dataset's states ``states`` (indices over ``shards`` in order,
     `shelf_env.training.distill.split_by_scene`'s): label 1 where the pick ended the episode invalid
     (``label_valid`` false: an object fell or the scene did not come to rest). Pushes are left out:
-    the filter masks picks."""
+    the filter masks picks. ``source``: only the labels of that origin (`shelf_env.privileged.dataset.SOURCES`,
+    e.g. ``"greedy"``: the driving model's own choice)."""
+    from shelf_env.privileged.dataset import SOURCES
+
+    if source is not None and source not in SOURCES:
+        raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
     obs, state, cell, label, objects, dsorted, first = [], [], [], [], [], [], 0
     local = np.full(sum(s.num_states for s in shards), -1, np.int64)
     local[states] = np.arange(len(states))
@@ -333,6 +338,8 @@ def teacher_split(shards: list[Any], states: np.ndarray) -> Split:
         pick = list(shard.meta["layout"]["map_names"]).index("pick")
         mine = local[first:first + shard.num_states]
         keep = (mine[a["label_state"]] >= 0) & (a["label_action"] // cells == pick)
+        if source is not None:
+            keep &= a["label_source"] == SOURCES.index(source)
         obs.append(a["obs"][mine >= 0])
         scene_objects = np.array([int(e["num_objects"]) for e in shard.meta["episodes"]])
         objects.append(scene_objects[a["state_episode"][mine >= 0]])

@@ -18,9 +18,10 @@ from shelf_env.fall_filter import geometry_features, geometry_risk_path
 from tests.test_fall_filter import crafted, paint
 
 
-def corridor_shards(folder, shards=3, episodes=8, states=5, seed=0):
+def corridor_shards(folder, shards=3, episodes=8, states=5, seed=0, greedy=False):
     """A teacher dataset of 20 x 30 cells (2 cm) whose picks fall exactly when a taller-than-clearance object
-    stands in front of the picked one in its columns (the carry account of `shelf_env.conditions.safe_picks`)."""
+    stands in front of the picked one in its columns (the carry account of `shelf_env.conditions.safe_picks`).
+    ``greedy``: each state's first labelled pick is the driving model's (source ``greedy``), the rest ``object``."""
     from shelf_env.privileged import dataset
 
     rng = np.random.default_rng(seed)
@@ -39,10 +40,11 @@ def corridor_shards(folder, shards=3, episodes=8, states=5, seed=0):
                 tall = {rc: float(rng.choice([0.04, 0.10, 0.14])) for rc in chosen}
                 for (r, c), h in tall.items():
                     paint(obs, slice(r - 1, r + 2), slice(c - 1, c + 2), CLASS_RGB[int(rng.integers(3))], h)
-                for (r, c), h in tall.items():
+                for k_obj, ((r, c), h) in enumerate(tall.items()):
                     blocked = any(c2 == c and r2 > r and h + h2 > Z_CARRY for (r2, c2), h2 in tall.items())
+                    source = dataset.SOURCES.index("greedy" if greedy and k_obj == 0 else "object")
                     for key, v in zip(dataset.LABEL_KEYS, (t, r * cols + c, not blocked, blocked, False,
-                                                           int(not blocked), 2)):
+                                                           int(not blocked), source)):
                         ep.labels[key].append(v)
                 ep.obs.append(obs)
                 for key, v in zip(dataset.EPISODE_STATE_KEYS, (t, 0, np.nan, 0)):
@@ -257,3 +259,46 @@ def test_a_test_set_inside_the_pool_leaves_the_split(tmp_path, capsys):
 
 def th_equal(a, b) -> bool:
     return a.shape == b.shape and bool((a == b).all())
+
+
+def test_the_greedy_report_reads_the_driving_policy_s_picks_in_the_validation_split(tmp_path, capsys):
+    """`greedy_report`: an exported risk on the greedy picks of a series' validation states, and on the other
+    picks of the same states; its AUC, bands and masked shares are the risk's on exactly those labels."""
+    data = tmp_path / "data"
+    corridor_shards(data, shards=2, greedy=True)
+    args = ["--data", str(data), "--val-fraction", "0.25"]
+    assert fg.main(["features", *args, "--blockers", "--out", str(tmp_path / "f.npz")]) == 0
+    assert fg.main(["fit", *args, "--features", str(tmp_path / "f.npz"), "--epochs", "5",
+                    "--out", str(tmp_path / "fit.json")]) == 0
+    risk_path = tmp_path / "r.geometry_risk.pt"
+    assert fg.main(["export", "--models", str(tmp_path / "fit.models.pt"), "--features", str(tmp_path / "f.npz"),
+                    "--threshold", "0.3", "--obs-shape", "4,20,30", "--out", str(risk_path)]) == 0
+    capsys.readouterr()
+    report = fg.greedy_report(data, 0.25, None, None, None, "s00", {"a": risk_path})
+    _, val = fr.load_splits(data, 0.25)
+    assert report["states"] == len(val.obs) == 4 * 5  # the last 4 of 16 scenes, 5 states each
+    greedy, others = report["greedy"], report["others"]
+    assert greedy["picks"] == 4 * 5 and others["picks"] == 4 * 5 * 6
+    assert greedy["picks"] + others["picks"] == len(val.label)
+    # the greedy picks are each state's first label: recompute the risk's numbers on exactly those
+    first = np.r_[True, np.diff(val.state.numpy()) != 0]
+    y = val.label.numpy()[first].astype(bool)
+    risk = ff.GeometryRisk.load(risk_path)
+    greedy_split = fr.Split(val.obs, val.state[first], val.cell[first], val.label[first])
+    r = risk.model.risk(fg.split_features(greedy_split, True))
+    assert greedy["invalid"] == pytest.approx(y.mean())
+    assert 0 < y.sum() < len(y) and greedy["a"]["auc"] == pytest.approx(fr.auc(y.astype(float), r))
+    bands = greedy["a"]["bands"]
+    assert sum(b["picks"] for b in bands) == len(y) and sum(b["invalid"] for b in bands) == y.sum()
+    assert greedy["a"]["bands"][-1]["picks"] == int((r >= 0.1).sum())  # the last band: at or over 0.1
+    assert greedy["a"]["masked_at_threshold"] == pytest.approx((r >= 0.3).mean())
+    with pytest.raises(ValueError, match="no shard of series 's07'"):
+        fg.greedy_report(data, 0.25, None, None, None, "s07", {"a": risk_path})
+    with pytest.raises(ValueError, match="source must be one of"):
+        fr.teacher_split([], np.zeros(0, np.int64), source="teachr")
+    bad = ["greedy", *args, "--series", "s00", "--out", str(tmp_path / "g.json")]
+    assert fg.main([*bad, "--risk", str(risk_path)]) == 2 and "NAME=PATH" in capsys.readouterr().err
+    assert fg.main([*bad, "--risk", "a=nope.pt"]) == 2 and "does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "g.json").exists()
+    assert fg.main([*bad, "--risk", f"a={risk_path}"]) == 0
+    assert json.loads((tmp_path / "g.json").read_text()) == json.loads(json.dumps(report))

@@ -4,7 +4,7 @@
 # round two's test set, which stays the test set; the refit beside the shipped geometry risk on the same validation
 # and test labels; then, by the page's rule, the refit as the shipped policy's filter at the shipped threshold 0.1
 # on the validation scenes, and on issue 10's held-out scenes if it passes there.
-# Usage: bash results/fall_model_refit/run.sh [features|fit|export|val|all]   |   bash .../run.sh open|closed|falls
+# Usage: bash results/fall_model_refit/run.sh [features|fit|export|val|greedy|all]   |   bash .../run.sh open|closed|falls
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -56,4 +56,10 @@ fi
 if [[ $step == falls ]]; then
   # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
   python -m research.push_guard falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
+fi
+if [[ $step == greedy || $step == all ]]; then
+  # (added after the validation numbers) both risks on the picks the shipped policy made: series 5's greedy picks in
+  # the refit's validation split
+  python -m research.fall_geometry greedy "${split[@]}" --series s05 --risk "shipped=$shipped_risk" \
+      --risk "refit=$out/p_s_georefit.geometry_risk.pt" --out "$out/greedy.json"
 fi
