@@ -1,6 +1,7 @@
 """``shelf-evaluate`` with the experiments' policy wrappers registered (``<zip>+fall-filter``, ``<zip>+veto``,
-``<zip>+symmetric``, ``<zip>+tiered-filter``, ``<zip>+push-guard``, ``<zip>+pick-first``; ``<zip>+geometry-filter``
-and ``<zip>+pick-guard`` are the product's, `shelf_env.fall_filter` and `shelf_env.pick_guard`).
+``<zip>+symmetric``, ``<zip>+tiered-filter``, ``<zip>+push-guard``, ``<zip>+pick-first``, ``<zip>+edge-guard``;
+``<zip>+geometry-filter`` and ``<zip>+pick-guard`` are the product's, `shelf_env.fall_filter` and
+`shelf_env.pick_guard`).
 
     python -m research.evaluate --policies results/fall_filter/model/p_s.zip+fall-filter ... (shelf-evaluate's options)
 """
@@ -8,6 +9,7 @@ and ``<zip>+pick-guard`` are the product's, `shelf_env.fall_filter` and `shelf_e
 from __future__ import annotations
 
 import research.distilled_veto  # noqa: F401  (registers +veto)
+import research.edge_guard  # noqa: F401  (registers +edge-guard)
 import research.fall_risk  # noqa: F401  (registers +fall-filter with shelf_env.policies)
 import research.push_guard  # noqa: F401  (registers +push-guard and +pick-first)
 import research.symmetric_q  # noqa: F401  (registers +symmetric)
