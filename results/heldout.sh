@@ -1,4 +1,5 @@
-# The held-out step shared by the experiments' run.sh (sourced, not run): a candidate policy that passed validation,
+# The validation and held-out steps shared by the experiments' run.sh (sourced, not run): `validate`, `after_validation`
+# (below) and `heldout`: a candidate policy that passed validation,
 # played on issue 10's held-out scenes beside the shipped policy and the baselines, whose cells are copied from an
 # earlier evaluation folder (--reuse-cells checks them by label and, for checkpoints, by file digest). Run from the
 # repository root; WORKERS (default 1) processes play the candidate's cells.
@@ -31,4 +32,35 @@ heldout() {
   python -m shelf_env.evaluation.report "$folder" --learned "$new" "${pick_only[@]}" --heuristics h-d h-a
   python -m shelf_env.evaluation.compare "$folder" --pair "$new" "$old" --pair "$new" "$ref" --pair "$new" h-d \
       --pair "$new" h-a --out "$folder/paired.md"
+}
+
+# validate OUT CANDIDATE NEW OLD REUSE SHIPPED: the candidate on the validation scenes (seeds 2000-2002, N = 5, 8, 11,
+# 30 runs: 270 scenes, open loop) beside the shipped policy, whose cells are copied from REUSE -> OUT/val90 and its
+# pairs NEW against OLD in OUT/val90_pairs.md.
+validate() {
+  local out=$1 candidate=$2 new=$3 old=$4 reuse=$5 shipped=$6
+  python -m research.evaluate --policies "$shipped" "$candidate" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 \
+      --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells "$reuse"
+  python -m shelf_env.evaluation.compare "$out/val90" --pair "$new" "$old" --out "$out/val90_pairs.md"
+}
+
+# after_validation STEP OUT CANDIDATE NEW OLD REF MODULE SHIPPED [OTHER...]: a candidate that passed validation on
+# issue 10's held-out scenes. open: the open-loop grid beside SHIPPED and OTHER (their cells from
+# results/pick_guard/open); closed: closed loop + safe picks beside SHIPPED, the shipped Q-maps alone, H-d and H-a
+# (from results/pick_guard/closed_safe); falls: its greedy fall rate per decision at N = 8 on the first 30 held-out
+# scenes of seed 0 (shelf_env.evaluation.falls with MODULE imported, which registers the candidate's wrapper;
+# resumable) -> OUT/falls30.json.
+after_validation() {
+  local step=$1 out=$2 candidate=$3 new=$4 old=$5 ref=$6 module=$7 shipped=$8
+  shift 8
+  case $step in
+    open) heldout open "$out" "$candidate" "$new" "$old" "$ref" results/pick_guard/open "$shipped" "$@" ;;
+    closed) heldout closed "$out" "$candidate" "$new" "$old" "$ref" results/pick_guard/closed_safe "$shipped" \
+        "$ref=examples/pretrained/p_s.zip" h-d h-a ;;
+    falls) python -c "import $module, sys; from shelf_env.evaluation.falls import main; sys.exit(main(sys.argv[1:]))" \
+        "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json" ;;
+    *)
+      echo "after_validation: the step is open, closed or falls, got '$step'" >&2
+      return 2 ;;
+  esac
 }

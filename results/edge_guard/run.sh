@@ -30,21 +30,9 @@ if [[ $step == live || $step == all ]]; then
 fi
 if [[ $step == val || $step == all ]]; then
   # validation: seeds 2000-2002, N = 5, 8, 11; the shipped policy's cells from results/push_guard/val90
-  python -m research.evaluate --policies "$shipped" "$candidate" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 \
-      --object-sets ycb --workers "${WORKERS:-1}" --out "$out/val90" --reuse-cells results/push_guard/val90
-  python -m shelf_env.evaluation.compare "$out/val90" --pair "$new" $old --out "$out/val90_pairs.md"
+  validate $out "$candidate" "$new" $old results/push_guard/val90 "$shipped"
 fi
-if [[ $step == open ]]; then
-  # held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
-  heldout open $out "$candidate" "$new" $old $ref results/pick_guard/open "$shipped" "${others[@]}"
-fi
-if [[ $step == closed ]]; then
-  # held-out, closed loop + safe picks: seed 0, N = 3..14
-  heldout closed $out "$candidate" "$new" $old $ref results/pick_guard/closed_safe "$shipped" \
-      "$ref=examples/pretrained/p_s.zip" h-d h-a
-fi
-if [[ $step == falls ]]; then
-  # the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
-  python -c "import research.edge_guard, sys; from shelf_env.evaluation.falls import main; sys.exit(main(sys.argv[1:]))" \
-      "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
+if [[ $step == open || $step == closed || $step == falls ]]; then
+  # held-out: the open-loop grid, closed loop + safe picks, the greedy fall rate at N = 8 (results/heldout.sh)
+  after_validation "$step" $out "$candidate" "$new" $old $ref research.edge_guard "$shipped" "${others[@]}"
 fi

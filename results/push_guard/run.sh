@@ -51,17 +51,8 @@ if [[ $step == open || $step == closed || $step == falls ]]; then
     r) candidate=$r; new=p_s_geo05+push-guard$wrap ;;
     *) echo "run.sh $step: name the candidate that passed validation, p, q or r" >&2; exit 2 ;;
   esac
-fi
-if [[ $step == open ]]; then
-  # 2. held-out, open loop: issue 10's grid (seeds 0-2, N = 3..14); every policy but the candidate copied
-  heldout open $out "$candidate" "$new" $old $ref results/pick_guard/open "$shipped" "${others[@]}"
-fi
-if [[ $step == closed ]]; then
-  # 3. held-out, closed loop + safe picks: seed 0, N = 3..14
-  heldout closed $out "$candidate" "$new" $old $ref results/pick_guard/closed_safe "$shipped" \
-      "$ref=examples/pretrained/p_s.zip" h-d h-a
-fi
-if [[ $step == falls ]]; then
-  # 4. the candidate's greedy fall rate per decision at N = 8, the first 30 held-out scenes of seed 0 (resumable)
-  python -m research.push_guard falls "$candidate" --ns 8 --runs 30 --seed 0 --out "$out/falls30.json"
+  # 2-4. held-out (results/heldout.sh): the open-loop grid (seeds 0-2, N = 3..14; every policy but the candidate
+  # copied), closed loop + safe picks (seed 0, N = 3..14), and the candidate's greedy fall rate per decision at N = 8
+  # on the first 30 held-out scenes of seed 0 (resumable)
+  after_validation "$step" $out "$candidate" "$new" $old $ref research.push_guard "$shipped" "${others[@]}"
 fi
