@@ -100,18 +100,19 @@ def _pool(data: pathlib.Path, max_shards: str | None, fresh: str | None, fresh_a
 
 def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None,
                   fresh_after: str | None, series: str, risks: dict[str, pathlib.Path],
-                  bands: tuple[float, ...] = (0.02, 0.05, 0.1)) -> dict[str, Any]:
+                  bands: tuple[float, ...] = (0.02, 0.05, 0.1), all_states: bool = False) -> dict[str, Any]:
     """How exported `GeometryRisk` models (``risks``: name -> file) rank the picks a driving policy made: the
-    greedy picks (label source ``greedy``) of ``series``' states in the validation split of `load_sets`, and, for
-    contrast, every other labelled pick of the same states. Per risk and set: the AUC, the invalid share and count
-    per band of the risk (edges ``bands``), and the share of the invalid picks at or over each risk's threshold."""
+    greedy picks (label source ``greedy``) of ``series``' states in the validation split of `load_sets` (every
+    state with ``all_states``: a probe set no model read), and, for contrast, every other labelled pick of the same
+    states. Per risk and set: the AUC, the invalid share and count per band of the risk (edges ``bands``), and the
+    share of the invalid picks at or over each risk's threshold."""
     from shelf_env.training.distill import split_by_scene
 
     if not 0 < val_fraction < 1:
         raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
     models = {name: GeometryRisk.load(path) for name, path in risks.items()}
     shards, _ = _pool(data, max_shards, fresh, fresh_after)
-    _, val = split_by_scene(shards, val_fraction)
+    val = list(range(sum(s.num_states for s in shards))) if all_states else split_by_scene(shards, val_fraction)[1]
     first = np.cumsum([0] + [s.num_states for s in shards])
     mine = [k for k, s in enumerate(shards) if s.path.name.startswith(series + "_")]
     if not mine:
@@ -125,7 +126,9 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
     picks = {"greedy": fall_risk.teacher_split(chosen, states, source="greedy")}
     every = fall_risk.teacher_split(chosen, states)
     picks["others"] = _without(every, picks["greedy"])
-    out: dict[str, Any] = {"series": series, "states": int(len(states)), "bands": list(bands)}
+    out: dict[str, Any] = {"series": series, "states": int(len(states)), "bands": list(bands),
+                           "all_states": all_states, "object_sets": sorted({str(s.meta.get("object_set"))
+                                                                             for s in chosen})}
     edges = np.array((0.0, *bands, np.inf))
     for set_name, split in picks.items():
         y = split.label.numpy().astype(bool)
@@ -141,6 +144,24 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
                            "masked_at_threshold": float((r >= risk.threshold).mean()) if len(r) else 0.0}
         out[set_name] = entry
     return out
+
+
+def probe(out: pathlib.Path, hours: float, model: str, series: int = 90, object_set: str = "ycb") -> int:
+    """A probe set of ``object_set`` scenes for measuring fall models on objects the teacher dataset never holds:
+    `shelf_env.privileged.dataset.collect` (labels and probes unchanged) driven by ``model`` as it plays (explore
+    1.0) into ``out``, which must not hold shards of another object set (so that it never enters a training-object
+    dataset). Resumable as the collector is; returns the shards written."""
+    from shelf_env.privileged import dataset
+
+    if object_set == "train":
+        raise ValueError("a probe is for objects the teacher dataset does not hold; the dataset collects 'train'")
+    if dataset.shard_files(out):
+        other = {str(s.meta.get("object_set")) for s in dataset.load_dataset(out)} - {object_set}
+        if other:
+            raise ValueError(f"{out} holds shards of object set(s) {sorted(other)}; a {object_set} probe goes in a "
+                             "folder of its own")
+    out.mkdir(parents=True, exist_ok=True)
+    return dataset.collect(out, series=series, hours=hours, model_path=model, explore=1.0, object_set=object_set)
 
 
 def _without(split: fall_risk.Split, part: fall_risk.Split) -> fall_risk.Split:
@@ -515,7 +536,14 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--series", required=True, help="the series whose greedy picks are read (s05)")
     g.add_argument("--risk", action="append", required=True, metavar="NAME=PATH",
                    help="an exported geometry risk (.geometry_risk.pt), repeatable")
+    g.add_argument("--all-states", action="store_true", help="every state, not the validation split (a probe set)")
     g.add_argument("--out", type=pathlib.Path, required=True, help="the report (JSON)")
+    pr = sub.add_parser("probe", help="a probe set of unseen-object scenes for measuring fall models (probe)")
+    pr.add_argument("--out", type=pathlib.Path, required=True, help="its own folder (never the teacher dataset)")
+    pr.add_argument("--hours", type=float, required=True, help="wall-clock budget; a shard under way is finished")
+    pr.add_argument("--model", required=True, help="the driving policy (a checkpoint with its wrappers)")
+    pr.add_argument("--series", type=int, default=90)
+    pr.add_argument("--object-set", default="ycb")
     e = sub.add_parser("export", help="a fit's model as a GeometryRisk (<stem>.geometry_risk.pt for a filter)")
     e.add_argument("--models", type=pathlib.Path, required=True, help="a fit run's .models.pt")
     e.add_argument("--name", default="mlp", help="which of its models (mlp, logistic)")
@@ -535,23 +563,27 @@ def main(argv: list[str] | None = None) -> int:
                               "blockers": exported.blockers}))
             return 0
         if args.command == "greedy":
-            risks = {}
+            risk_files = {}
             for item in args.risk:
                 name, sep, path = item.partition("=")
                 if not sep or not name or not path:
                     raise ValueError(f"--risk takes NAME=PATH, got {item!r}")
                 if not pathlib.Path(path).is_file():
                     raise ValueError(f"--risk {item}: {path} does not exist")
-                risks[name] = pathlib.Path(path)
+                risk_files[name] = pathlib.Path(path)
             result = greedy_report(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after,
-                                   args.series, risks)
+                                   args.series, risk_files, all_states=args.all_states)
             write_json_atomically(args.out, result)
-            print(json.dumps({k: {n: v[n]["auc"] for n in risks} | {"picks": v["picks"], "invalid": v["invalid"]}
+            print(json.dumps({k: {n: v[n]["auc"] for n in risk_files} | {"picks": v["picks"], "invalid": v["invalid"]}
                               for k, v in result.items() if k in ("greedy", "others")}))
             return 0
+        if args.command == "probe":
+            print(json.dumps({"shards_written": probe(args.out, args.hours, args.model, args.series,
+                                                      args.object_set)}))
+            return 0
         if args.command == "features":
-            sets = load_sets(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after)
-            print(json.dumps(build(sets, args.out, args.blockers)))
+            built = load_sets(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after)
+            print(json.dumps(build(built, args.out, args.blockers)))
             return 0
         if not args.features.is_file():
             raise ValueError(f"{args.features} does not exist; make it with `features`")

@@ -51,7 +51,8 @@ def corridor_shards(folder, shards=3, episodes=8, states=5, seed=0, greedy=False
                     ep.states[key].append(v)
             eps.append(ep)
         meta = {"format": dataset.FORMAT, "dynamics_version": dataset.DYNAMICS_VERSION, "layout": layout,
-                "series": 0, "shard": k, "episodes": [{"num_objects": 7} for _ in range(episodes)]}
+                "series": 0, "shard": k, "episodes": [{"num_objects": 7} for _ in range(episodes)],
+                "object_set": "train"}
         dataset.save_shard(folder / f"s00_{k:05d}.npz", meta, eps, layout["obs_shape"])
 
 
@@ -302,3 +303,22 @@ def test_the_greedy_report_reads_the_driving_policy_s_picks_in_the_validation_sp
     assert not (tmp_path / "g.json").exists()
     assert fg.main([*bad, "--risk", f"a={risk_path}"]) == 0
     assert json.loads((tmp_path / "g.json").read_text()) == json.loads(json.dumps(report))
+    # --all-states: every state of the series (a probe set), not the validation split
+    every = fg.greedy_report(data, 0.25, None, None, None, "s00", {"a": risk_path}, all_states=True)
+    assert every["states"] == 2 * 8 * 5 and every["greedy"]["picks"] == 2 * 8 * 5 and every["object_sets"] == ["train"]
+
+
+def test_a_probe_of_unseen_objects_never_shares_a_folder_with_training_objects(tmp_path, capsys):
+    data = tmp_path / "data"
+    corridor_shards(data, shards=1)
+    model = "examples/pretrained/p_s.zip"
+    with pytest.raises(ValueError, match=r"holds shards of object set\(s\) \['train'\]"):
+        fg.probe(data, 0.1, model)
+    with pytest.raises(ValueError, match="the dataset collects 'train'"):
+        fg.probe(tmp_path / "probe", 0.1, model, object_set="train")
+    assert fg.main(["probe", "--out", str(tmp_path / "probe"), "--hours", "0", "--model", model]) == 2
+    assert "hours must be > 0" in capsys.readouterr().err  # the collector's own check
+    assert fg.main(["probe", "--out", str(tmp_path / "probe"), "--hours", "1e-9", "--model", model]) == 0
+    assert json.loads(capsys.readouterr().out) == {"shards_written": 0} and (tmp_path / "probe").is_dir()
+    assert fg.main(["probe", "--out", str(data), "--hours", "1", "--model", model]) == 2
+    assert "a ycb probe goes in a folder of its own" in capsys.readouterr().err

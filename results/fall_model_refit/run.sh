@@ -4,7 +4,7 @@
 # round two's test set, which stays the test set; the refit beside the shipped geometry risk on the same validation
 # and test labels; then, by the page's rule, the refit as the shipped policy's filter at the shipped threshold 0.1
 # on the validation scenes, and on issue 10's held-out scenes if it passes there.
-# Usage: bash results/fall_model_refit/run.sh [features|fit|export|val|greedy|all]   |   bash .../run.sh open|closed|falls
+# Usage: bash results/fall_model_refit/run.sh [features|fit|export|val|greedy|probe|greedy_ycb|all]   |   ... open|closed|falls
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -51,4 +51,15 @@ if [[ $step == greedy || $step == all ]]; then
   # the refit's validation split
   python -m research.fall_geometry greedy "${split[@]}" --series s05 --risk "shipped=$shipped_risk" \
       --risk "refit=$out/p_s_georefit.geometry_risk.pt" --out "$out/greedy.json"
+fi
+if [[ $step == probe ]]; then
+  # (added after the greedy picks' numbers) a YCB probe set, never part of data/teacher: the shipped policy driving,
+  # series 90, 30 minutes on one core (resumable: shards on disk are skipped)
+  python -m research.fall_geometry probe --out "$out/ycb_probe" --hours 0.5 --series 90 \
+      --model "examples/pretrained/p_s.zip$wrap"
+fi
+if [[ $step == greedy_ycb || $step == all ]]; then
+  # both risks on the probe's picks, every state
+  python -m research.fall_geometry greedy --data "$out/ycb_probe" --series s90 --all-states \
+      --risk "shipped=$shipped_risk" --risk "refit=$out/p_s_georefit.geometry_risk.pt" --out "$out/greedy_ycb.json"
 fi
