@@ -102,7 +102,8 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
                   fresh_after: str | None, series: str, risks: dict[str, pathlib.Path],
                   bands: tuple[float, ...] = (0.02, 0.05, 0.1), all_states: bool = False) -> dict[str, Any]:
     """How exported `GeometryRisk` models (``risks``: name -> file) rank the picks a driving policy made: the
-    greedy picks (label source ``greedy``) of ``series``' states in the validation split of `load_sets` (every
+    greedy picks (label source ``greedy``) of ``series``' states (one series or several, ``"s90,s91"``) in the
+    validation split of `load_sets` (every
     state with ``all_states``: a probe set no model read), and, for contrast, every other labelled pick of the same
     states. Per risk and set: the AUC, the invalid share and count per band of the risk (edges ``bands``), and the
     share of the invalid picks at or over each risk's threshold."""
@@ -114,7 +115,8 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
     shards, _ = _pool(data, max_shards, fresh, fresh_after)
     val = list(range(sum(s.num_states for s in shards))) if all_states else split_by_scene(shards, val_fraction)[1]
     first = np.cumsum([0] + [s.num_states for s in shards])
-    mine = [k for k, s in enumerate(shards) if s.path.name.startswith(series + "_")]
+    prefixes = tuple(f"{name.strip()}_" for name in series.split(","))
+    mine = [k for k, s in enumerate(shards) if s.path.name.startswith(prefixes)]
     if not mine:
         raise ValueError(f"no shard of series {series!r} among --max-shards {max_shards}")
     index = np.array(val)
@@ -533,7 +535,7 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--val-fraction", type=float, default=0.2)
     g.add_argument("--fresh", default=None, help="the test set left out of the split (as `features`)")
     g.add_argument("--fresh-after", default=None, help="as `features`")
-    g.add_argument("--series", required=True, help="the series whose greedy picks are read (s05)")
+    g.add_argument("--series", required=True, help="the series whose greedy picks are read (s05; s90,s91)")
     g.add_argument("--risk", action="append", required=True, metavar="NAME=PATH",
                    help="an exported geometry risk (.geometry_risk.pt), repeatable")
     g.add_argument("--all-states", action="store_true", help="every state, not the validation split (a probe set)")

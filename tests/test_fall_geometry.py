@@ -306,6 +306,8 @@ def test_the_greedy_report_reads_the_driving_policy_s_picks_in_the_validation_sp
     # --all-states: every state of the series (a probe set), not the validation split
     every = fg.greedy_report(data, 0.25, None, None, None, "s00", {"a": risk_path}, all_states=True)
     assert every["states"] == 2 * 8 * 5 and every["greedy"]["picks"] == 2 * 8 * 5 and every["object_sets"] == ["train"]
+    listed = fg.greedy_report(data, 0.25, None, None, None, "s07, s00", {"a": risk_path}, all_states=True)
+    assert listed["series"] == "s07, s00" and {**listed, "series": "s00"} == every  # a list of series: any of them
 
 
 def test_a_probe_of_unseen_objects_never_shares_a_folder_with_training_objects(tmp_path, capsys):

@@ -54,12 +54,16 @@ if [[ $step == greedy || $step == all ]]; then
 fi
 if [[ $step == probe ]]; then
   # (added after the greedy picks' numbers) a YCB probe set, never part of data/teacher: the shipped policy driving,
-  # series 90, 30 minutes on one core (resumable: shards on disk are skipped)
+  # series 90 for 30 minutes and series 91 for 45 minutes, one core each, side by side (resumable: shards on disk are
+  # skipped)
   python -m research.fall_geometry probe --out "$out/ycb_probe" --hours 0.5 --series 90 \
+      --model "examples/pretrained/p_s.zip$wrap" &
+  python -m research.fall_geometry probe --out "$out/ycb_probe" --hours 0.75 --series 91 \
       --model "examples/pretrained/p_s.zip$wrap"
+  wait
 fi
 if [[ $step == greedy_ycb || $step == all ]]; then
   # both risks on the probe's picks, every state
-  python -m research.fall_geometry greedy --data "$out/ycb_probe" --series s90 --all-states \
+  python -m research.fall_geometry greedy --data "$out/ycb_probe" --series s90,s91 --all-states \
       --risk "shipped=$shipped_risk" --risk "refit=$out/p_s_georefit.geometry_risk.pt" --out "$out/greedy_ycb.json"
 fi
