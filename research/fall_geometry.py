@@ -15,7 +15,12 @@ would hit (`BLOCKER_FEATURES`). The features, the model and the filter are the p
   `research.fall_risk.penalty_report` with each risk);
 - `channels`: the fall model's recipe with the features as more input channels (`feature_channels`);
 - `export`: a fitted model as a per-cell risk (`GeometryRisk`) beside a checkpoint, which
-  ``<zip>+geometry-filter`` plays under `shelf_env.fall_filter.FallFilter` (registered by `shelf_env.policies`).
+  ``<zip>+geometry-filter`` plays under `shelf_env.fall_filter.FallFilter` (registered by `shelf_env.policies`);
+- `greedy`: exported risks on the picks a driving policy made (`greedy_report`; docs/experiments/fall-model-refit.md);
+- `probe`: a probe set of unseen-object scenes in a folder of its own, never the teacher dataset (`probe`).
+
+``features``, ``fit`` and ``greedy`` take ``--fresh-after``, so that a refit on a grown dataset keeps an older test
+set that sits inside ``--max-shards``.
 
 Measured: round two's MLP ranks the falls at AUC 0.902 on validation and 0.926 on the test set (the fall
 model 0.866 / 0.897); as a mask at 0.1 on the shipped P+S it sorted 113 of the 270 validation scenes against
@@ -103,10 +108,9 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
                   bands: tuple[float, ...] = (0.02, 0.05, 0.1), all_states: bool = False) -> dict[str, Any]:
     """How exported `GeometryRisk` models (``risks``: name -> file) rank the picks a driving policy made: the
     greedy picks (label source ``greedy``) of ``series``' states (one series or several, ``"s90,s91"``) in the
-    validation split of `load_sets` (every
-    state with ``all_states``: a probe set no model read), and, for contrast, every other labelled pick of the same
-    states. Per risk and set: the AUC, the invalid share and count per band of the risk (edges ``bands``), and the
-    share of the invalid picks at or over each risk's threshold."""
+    validation split of `load_sets` (every state with ``all_states``: a probe set no model read), and, for contrast,
+    every other labelled pick of the same states. Per risk and set: the AUC, the invalid share and count per band of
+    the risk (edges ``bands``), and the share of the invalid picks at or over each risk's threshold."""
     from shelf_env.training.distill import split_by_scene
 
     if not 0 < val_fraction < 1:
