@@ -19,8 +19,8 @@ would hit (`BLOCKER_FEATURES`). The features, the model and the filter are the p
 - `greedy`: exported risks on the picks a driving policy made (`greedy_report`; docs/experiments/fall-model-refit.md);
 - `probe`: a probe set of unseen-object scenes in a folder of its own, never the teacher dataset (`probe`).
 
-``features``, ``fit`` and ``greedy`` take ``--fresh-after``, so that a refit on a grown dataset keeps an older test
-set that sits inside ``--max-shards``.
+``features``, ``fit``, ``channels`` and ``greedy`` take ``--fresh-after``, so that a refit on a grown dataset keeps an
+older test set that sits inside ``--max-shards``.
 
 Measured: round two's MLP ranks the falls at AUC 0.902 on validation and 0.926 on the test set (the fall
 model 0.866 / 0.897); as a mask at 0.1 on the shipped P+S it sorted 113 of the 270 validation scenes against
