@@ -103,14 +103,19 @@ def _pool(data: pathlib.Path, max_shards: str | None, fresh: str | None, fresh_a
     return shards, test
 
 
+#: The groups of N that `greedy_report` breaks its invalid picks down by.
+N_GROUPS = ((3, 6), (7, 10), (11, 14))
+
+
 def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None,
                   fresh_after: str | None, series: str, risks: dict[str, pathlib.Path],
                   bands: tuple[float, ...] = (0.02, 0.05, 0.1), all_states: bool = False) -> dict[str, Any]:
     """How exported `GeometryRisk` models (``risks``: name -> file) rank the picks a driving policy made: the
     greedy picks (label source ``greedy``) of ``series``' states (one series or several, ``"s90,s91"``) in the
     validation split of `load_sets` (every state with ``all_states``: a probe set no model read), and, for contrast,
-    every other labelled pick of the same states. Per risk and set: the AUC, the invalid share and count per band of
-    the risk (edges ``bands``), and the share of the invalid picks at or over each risk's threshold."""
+    every other labelled pick of the same states. Per set: the picks and the invalid ones per group of N
+    (`N_GROUPS`); per risk and set: the AUC, the invalid share and count per band of the risk (edges ``bands``), and
+    the share of the invalid picks at or over each risk's threshold."""
     from shelf_env.training.distill import split_by_scene
 
     if not 0 < val_fraction < 1:
@@ -139,6 +144,11 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
     for set_name, split in picks.items():
         y = split.label.numpy().astype(bool)
         entry: dict[str, Any] = {"picks": int(len(y)), "invalid": float(y.mean()) if len(y) else float("nan")}
+        if split.objects is not None:  # by the scene's number of objects: sets of other N mixes compare
+            n = split.objects[split.state.numpy()]
+            entry["by_n"] = {f"{lo}-{hi}": {"picks": int(((n >= lo) & (n <= hi)).sum()),
+                                            "invalid": int(y[(n >= lo) & (n <= hi)].sum())}
+                             for lo, hi in N_GROUPS}
         for name, risk in models.items():
             need = bool(risk.blockers)
             r = risk.model.risk(split_features(split, need))

@@ -280,6 +280,8 @@ def test_the_greedy_report_reads_the_driving_policy_s_picks_in_the_validation_sp
     assert report["states"] == len(val.obs) == 4 * 5  # the last 4 of 16 scenes, 5 states each
     greedy, others = report["greedy"], report["others"]
     assert greedy["picks"] == 4 * 5 and others["picks"] == 4 * 5 * 6
+    assert greedy["by_n"] == {"3-6": {"picks": 0, "invalid": 0}, "7-10": {"picks": 20, "invalid": int(
+        val.label.numpy()[np.r_[True, np.diff(val.state.numpy()) != 0]].sum())}, "11-14": {"picks": 0, "invalid": 0}}
     assert greedy["picks"] + others["picks"] == len(val.label)
     # the greedy picks are each state's first label: recompute the risk's numbers on exactly those
     first = np.r_[True, np.diff(val.state.numpy()) != 0]
