@@ -43,15 +43,18 @@ EDGE_GUARD = "+edge-guard"
 ROW_SLACK, COL_SLACK = 1.0, 0.5
 
 
-def borderline_cells(obs: np.ndarray, row_slack: float = ROW_SLACK, col_slack: float = COL_SLACK) -> np.ndarray:
+def borderline_cells(obs: np.ndarray, row_slack: float = ROW_SLACK, col_slack: float = COL_SLACK,
+                     view: ObservationView | None = None) -> np.ndarray:
     """Bool ``(H, W)``: the cells of the objects that do not look sorted in ``obs`` but whose blob centroid lies
-    within their class's region widened as the module docstring says."""
+    within their class's region widened as the module docstring says. ``view``: ``obs`` already read
+    (`ObservationView.from_observation` with ``margin_cells=0``), so that a caller who holds it does not read it
+    twice."""
     obs = np.asarray(obs)
     if obs.ndim != 3 or obs.shape[0] != 4:
         raise ValueError(f"borderline_cells reads one (4, H, W) observation, got shape {obs.shape}")
     rows, cols = obs.shape[1:]
     width = int(round(params.REGION_WIDTH / (params.CABINET_WIDTH / cols)))
-    view = ObservationView.from_observation(obs, margin_cells=0)
+    view = ObservationView.from_observation(obs, margin_cells=0) if view is None else view
     out = np.zeros((rows, cols), bool)
     for b in range(int(view.blob.max()) + 1):
         cells = view.blob == b
@@ -95,26 +98,25 @@ def greedy_stats(folder: pathlib.Path, max_shards: str) -> dict[str, int]:
     """Counts over the shards ``max_shards`` selects (`select_shards`' spec): the driver's greedy picks on an object
     by outcome (``sorted``: the sorted count rose and the scene stayed valid; ``same``: valid, unchanged;
     ``unsorted``: valid, fell; ``invalid``), each also counted where the object is borderline."""
+    from research.fall_risk import teacher_split
     from shelf_env.privileged import dataset
 
-    greedy = dataset.SOURCES.index("greedy")
     counts: dict[str, int] = {}
     shards = dataset.select_shards(dataset.load_dataset(folder), max_shards)
-    for shard in shards:
-        a = shard.arrays
-        rows, cols = a["obs"].shape[2:]
-        pick = list(shard.meta["layout"]["map_names"]).index("pick")
-        for i in np.flatnonzero((a["label_source"] == greedy) & (a["label_action"] // (rows * cols) == pick)):
-            obs = a["obs"][a["label_state"][i]]
-            r, c = divmod(int(a["label_action"][i] % (rows * cols)), cols)
-            if ObservationView.from_observation(obs, margin_cells=0).blob[r, c] < 0:
-                continue
-            d = int(a["label_dsorted"][i])
-            kind = ("invalid" if not a["label_valid"][i] else "sorted" if d > 0 else "same" if d == 0
-                    else "unsorted")
-            counts[kind] = counts.get(kind, 0) + 1
-            if borderline_cells(obs)[r, c]:
-                counts[kind + "_borderline"] = counts.get(kind + "_borderline", 0) + 1
+    picks = teacher_split(shards, np.arange(sum(s.num_states for s in shards)), source="greedy")
+    assert picks.sorted_change is not None  # a teacher dataset's split has it
+    cols = picks.obs.shape[-1]
+    for state, cell, invalid, d in zip(picks.state.numpy(), picks.cell.numpy(), picks.label.numpy(),
+                                       picks.sorted_change):
+        obs = picks.obs[int(state)].numpy()
+        r, c = divmod(int(cell), cols)
+        view = ObservationView.from_observation(obs, margin_cells=0)
+        if view.blob[r, c] < 0:
+            continue
+        kind = "invalid" if invalid else "sorted" if d > 0 else "same" if d == 0 else "unsorted"
+        counts[kind] = counts.get(kind, 0) + 1
+        if borderline_cells(obs, view=view)[r, c]:
+            counts[kind + "_borderline"] = counts.get(kind + "_borderline", 0) + 1
     return counts
 
 
@@ -155,8 +157,8 @@ def live_counts(policy: str, n: int, runs: int, first_seed: int, object_set: str
                 primitive, r, c = u.codec.decode(int(np.asarray(action).reshape(-1)[0]))
                 before, was = u.world.positions().copy(), judge(u.world)
                 view = ObservationView.from_observation(obs, margin_cells=0)
-                reading = ("looked_sorted" if view.sorted_cells[r, c] else "borderline" if borderline_cells(obs)[r, c]
-                           else "clear")
+                reading = ("looked_sorted" if view.sorted_cells[r, c]
+                           else "borderline" if borderline_cells(obs, view=view)[r, c] else "clear")
                 obs, _, terminated, truncated, _ = env.step(action)
                 done = terminated or truncated
                 if primitive != "pick":

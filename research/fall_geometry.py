@@ -122,16 +122,13 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
         raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
     models = {name: GeometryRisk.load(path) for name, path in risks.items()}
     shards, _ = _pool(data, max_shards, fresh, fresh_after)
-    val = list(range(sum(s.num_states for s in shards))) if all_states else split_by_scene(shards, val_fraction)[1]
-    first = np.cumsum([0] + [s.num_states for s in shards])
     prefixes = tuple(f"{name.strip()}_" for name in series.split(","))
-    mine = [k for k, s in enumerate(shards) if s.path.name.startswith(prefixes)]
-    if not mine:
+    chosen = [s for s in shards if s.path.name.startswith(prefixes)]
+    if not chosen:
         raise ValueError(f"no shard of series {series!r} among --max-shards {max_shards}")
-    index = np.array(val)
-    own = [index[(index >= first[k]) & (index < first[k + 1])] - first[k] for k in mine]
-    chosen = [shards[k] for k in mine]
-    states = np.concatenate([o + offset for o, offset in zip(own, np.cumsum([0] + [s.num_states for s in chosen]))])
+    # split_by_scene holds out the last scenes of each series apart, so the chosen series' split is the pool's
+    states = (np.arange(sum(s.num_states for s in chosen)) if all_states
+              else np.array(split_by_scene(chosen, val_fraction)[1], np.int64))
     if len(states) == 0:
         raise ValueError(f"series {series} has no state in the validation split")
     picks = {"greedy": fall_risk.teacher_split(chosen, states, source="greedy")}
