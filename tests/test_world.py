@@ -72,3 +72,43 @@ def test_ycb_set_has_required_kinds_and_episodes_use_at_most_three():
         assert 1 <= len(kinds) <= min(3, n)
     with pytest.raises(ValueError, match="unknown object_set"):
         sample_specs("lego", 3, rng)
+
+
+def test_wide_training_set_spans_the_test_sets_ranges_with_the_same_draws():
+    from shelf_env.world import objects
+
+    train = sample_specs("train", 400, np.random.default_rng(3))
+    wide = sample_specs("train-wide", 400, np.random.default_rng(3))
+    # the same draws from the generator: the same shapes in the same order, only the ranges differ
+    assert [s.kind for s in train] == [s.kind for s in wide]
+    assert {s.kind for s in wide} == {"cuboid", "cylinder"}
+    for specs, (h_lo, h_hi), (m_lo, m_hi) in ((train, objects.TRAIN_HEIGHT, objects.TRAIN_MASS),
+                                              (wide, objects.WIDE_HEIGHT, objects.WIDE_MASS)):
+        heights, masses = np.array([s.height for s in specs]), np.array([s.mass for s in specs])
+        assert heights.min() >= h_lo - 1e-9 and heights.max() <= h_hi + 1e-9
+        assert masses.min() >= m_lo and masses.max() <= m_hi
+    heights = np.array([s.height for s in wide])
+    masses = np.array([s.mass for s in wide])
+    ycb = list(YCB_KINDS.values())
+    # the wide set reaches the test objects' extremes that the training set never does
+    assert heights.max() > objects.TRAIN_HEIGHT[1] and heights.max() >= 0.9 * max(s.height for s in ycb)
+    assert masses.min() < objects.TRAIN_MASS[0] and masses.min() <= 2 * min(s.mass for s in ycb)
+    assert masses.max() >= 0.9 * max(s.mass for s in ycb)
+    assert all(abs(v / objects.SIZE_GRID - round(v / objects.SIZE_GRID)) < 1e-6 for s in wide for v in s.size)
+    assert "train-wide" in objects.OBJECT_SETS
+
+
+def test_env_spawns_a_full_wide_scene():
+    import gymnasium as gym
+
+    import shelf_env  # noqa: F401  (registers ShelfSort-v0)
+
+    env = gym.make("ShelfSort-v0", num_objects=14, object_set="train-wide").unwrapped
+    try:
+        env.reset(seed=5)
+        world = env.world
+        assert len(world.objects) == 14
+        assert World.inside(world.positions()).all()
+        assert max(o.spec.height for o in world.objects) > 0.12  # taller than any training object
+    finally:
+        env.close()
