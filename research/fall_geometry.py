@@ -34,6 +34,7 @@ import dataclasses
 import json
 import pathlib
 import sys
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -71,24 +72,28 @@ class Sets:
 
 
 def load_sets(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None = None,
-              fresh_after: str | None = None) -> Sets:
+              fresh_after: str | None = None, extra: Sequence[pathlib.Path] = ()) -> Sets:
     """`Sets` of the teacher dataset ``data``: the split of `research.fall_risk.load_splits` (``max_shards``,
     ``val_fraction``), the scene of each validation state (the two-fold split of `twofold` keeps a scene's
     states together) and, with ``fresh``, the test set (`fresh_split`: ``fresh``'s shards that ``fresh_after``,
     by default ``max_shards``, leaves out). The test set's shards are left out of the training and validation
-    splits, so that a refit on a grown dataset can keep an older test set that sits inside ``max_shards``."""
+    splits, so that a refit on a grown dataset can keep an older test set that sits inside ``max_shards``. Every
+    shard of each ``extra`` folder (another object set's series, kept out of ``data``) joins the pool and is split by
+    scene as its own series."""
     if not 0 < val_fraction < 1:
         raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
-    shards, test = _pool(data, max_shards, fresh, fresh_after)
+    shards, test = _pool(data, max_shards, fresh, fresh_after, extra)
     train, val, val_index = fall_risk.split_teacher_shards(shards, val_fraction, name=str(data))
     scene = np.concatenate([shard.arrays["state_episode"].astype(np.int64) + 1000 * k
                             for k, shard in enumerate(shards)])
     return Sets(train, val, scene[val_index], None if test is None else _whole(test))
 
 
-def _pool(data: pathlib.Path, max_shards: str | None, fresh: str | None, fresh_after: str | None
-          ) -> tuple[list[Any], list[Any] | None]:
-    """The shards a split is drawn from (``max_shards`` without the test set's) and the test set's shards."""
+def _pool(data: pathlib.Path, max_shards: str | None, fresh: str | None, fresh_after: str | None,
+          extra: Sequence[pathlib.Path] = ()) -> tuple[list[Any], list[Any] | None]:
+    """The shards a split is drawn from (``max_shards`` without the test set's, then every shard of each ``extra``
+    folder) and the test set's shards. A shard name that two folders share is refused: each folder's series must be
+    its own, or the split by scene would mix them."""
     from shelf_env.privileged import dataset
 
     if fresh_after is not None and fresh is None:
@@ -100,6 +105,15 @@ def _pool(data: pathlib.Path, max_shards: str | None, fresh: str | None, fresh_a
     shards = [s for s in dataset.select_shards(every, max_shards) if s.path.name not in left_out]
     if not shards:
         raise ValueError(f"--max-shards {max_shards} selects no shard outside the test set --fresh {fresh}")
+    seen = {s.path.name: data for s in every}
+    for folder in extra:
+        more = dataset.load_dataset(folder)  # refuses a folder without shards
+        for shard in more:
+            if shard.path.name in seen:
+                raise ValueError(f"--extra-data {folder}: shard {shard.path.name} is also in {seen[shard.path.name]}; "
+                                 "an extra folder's series must be its own")
+            seen[shard.path.name] = folder
+        shards += more
     return shards, test
 
 
@@ -109,19 +123,20 @@ N_GROUPS = ((3, 6), (7, 10), (11, 14))
 
 def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None,
                   fresh_after: str | None, series: str, risks: dict[str, pathlib.Path],
-                  bands: tuple[float, ...] = (0.02, 0.05, 0.1), all_states: bool = False) -> dict[str, Any]:
+                  bands: tuple[float, ...] = (0.02, 0.05, 0.1), all_states: bool = False,
+                  extra: Sequence[pathlib.Path] = ()) -> dict[str, Any]:
     """How exported `GeometryRisk` models (``risks``: name -> file) rank the picks a driving policy made: the
     greedy picks (label source ``greedy``) of ``series``' states (one series or several, ``"s90,s91"``) in the
     validation split of `load_sets` (every state with ``all_states``: a probe set no model read), and, for contrast,
-    every other labelled pick of the same states. Per set: the picks and the invalid ones per group of N
-    (`N_GROUPS`); per risk and set: the AUC, the invalid share and count per band of the risk (edges ``bands``), and
-    the share of the invalid picks at or over each risk's threshold."""
+    every other labelled pick of the same states; ``extra`` folders join the pool as in `load_sets`. Per set: the
+    picks and the invalid ones per group of N (`N_GROUPS`); per risk and set: the AUC, the invalid share and count
+    per band of the risk (edges ``bands``), and the share of the invalid picks at or over each risk's threshold."""
     from shelf_env.training.distill import split_by_scene
 
     if not 0 < val_fraction < 1:
         raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
     models = {name: GeometryRisk.load(path) for name, path in risks.items()}
-    shards, _ = _pool(data, max_shards, fresh, fresh_after)
+    shards, _ = _pool(data, max_shards, fresh, fresh_after, extra)
     prefixes = tuple(f"{name.strip()}_" for name in series.split(","))
     chosen = [s for s in shards if s.path.name.startswith(prefixes)]
     if not chosen:
@@ -522,6 +537,8 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--fresh-after", default=None,
                        help="the shards the test set comes after (a --max-shards spec; default --max-shards): "
                             "--fresh's shards that it leaves out are the test set, and they leave the split")
+        p.add_argument("--extra-data", type=pathlib.Path, action="append", default=[],
+                       help="a folder whose every shard joins the pool (another object set's series), repeatable")
         p.add_argument("--out", type=pathlib.Path, required=True)
         if name == "features":
             p.add_argument("--blockers", action="store_true", help="round two's blocker features too")
@@ -546,6 +563,7 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--val-fraction", type=float, default=0.2)
     g.add_argument("--fresh", default=None, help="the test set left out of the split (as `features`)")
     g.add_argument("--fresh-after", default=None, help="as `features`")
+    g.add_argument("--extra-data", type=pathlib.Path, action="append", default=[], help="as `features`")
     g.add_argument("--series", required=True, help="the series whose greedy picks are read (s05; s90,s91)")
     g.add_argument("--risk", action="append", required=True, metavar="NAME=PATH",
                    help="an exported geometry risk (.geometry_risk.pt), repeatable")
@@ -585,7 +603,7 @@ def main(argv: list[str] | None = None) -> int:
                     raise ValueError(f"--risk {item}: {path} does not exist")
                 risk_files[name] = pathlib.Path(path)
             result = greedy_report(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after,
-                                   args.series, risk_files, all_states=args.all_states)
+                                   args.series, risk_files, all_states=args.all_states, extra=args.extra_data)
             write_json_atomically(args.out, result)
             print(json.dumps({k: {n: v[n]["auc"] for n in risk_files} | {"picks": v["picks"], "invalid": v["invalid"]}
                               for k, v in result.items() if k in ("greedy", "others")}))
@@ -595,7 +613,8 @@ def main(argv: list[str] | None = None) -> int:
                                                       args.object_set)}))
             return 0
         if args.command == "features":
-            built = load_sets(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after)
+            built = load_sets(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after,
+                              args.extra_data)
             print(json.dumps(build(built, args.out, args.blockers)))
             return 0
         if not args.features.is_file():
@@ -603,8 +622,8 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, "compare", None) is not None and not args.compare.is_file():
             raise ValueError(f"--compare {args.compare} does not exist")
         needs_data = args.command == "channels" or args.fall_model is not None or args.checkpoint is not None
-        sets = (load_sets(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after) if needs_data
-                else None)
+        sets = (load_sets(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after,
+                          args.extra_data) if needs_data else None)
         if args.command == "channels":
             assert sets is not None
             result = channels_run(sets, args.features, args.out, args.checkpoint, args.epochs, args.fall_model,

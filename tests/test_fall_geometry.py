@@ -18,7 +18,7 @@ from shelf_env.fall_filter import geometry_features, geometry_risk_path
 from tests.test_fall_filter import crafted, paint
 
 
-def corridor_shards(folder, shards=3, episodes=8, states=5, seed=0, greedy=False):
+def corridor_shards(folder, shards=3, episodes=8, states=5, seed=0, greedy=False, series=0, object_set="train"):
     """A teacher dataset of 20 x 30 cells (2 cm) whose picks fall exactly when a taller-than-clearance object
     stands in front of the picked one in its columns (the carry account of `shelf_env.conditions.safe_picks`).
     ``greedy``: each state's first labelled pick is the driving model's (source ``greedy``), the rest ``object``."""
@@ -51,9 +51,9 @@ def corridor_shards(folder, shards=3, episodes=8, states=5, seed=0, greedy=False
                     ep.states[key].append(v)
             eps.append(ep)
         meta = {"format": dataset.FORMAT, "dynamics_version": dataset.DYNAMICS_VERSION, "layout": layout,
-                "series": 0, "shard": k, "episodes": [{"num_objects": 7} for _ in range(episodes)],
-                "object_set": "train"}
-        dataset.save_shard(folder / f"s00_{k:05d}.npz", meta, eps, layout["obs_shape"])
+                "series": series, "shard": k, "episodes": [{"num_objects": 7} for _ in range(episodes)],
+                "object_set": object_set}
+        dataset.save_shard(dataset.shard_path(folder, series, k), meta, eps, layout["obs_shape"])
 
 
 def test_the_command_line_learns_a_corridor_rule_and_joins_the_fall_model(tmp_path, capsys):
@@ -256,6 +256,34 @@ def test_a_test_set_inside_the_pool_leaves_the_split(tmp_path, capsys):
     assert fg.main([*args, "--fresh", "s00:2", "--fresh-after", "s00:1"]) == 0
     built = json.loads(capsys.readouterr().out)
     assert built["test_labels"] == len(test.label) and built["train_labels"] == len(train.label)
+
+
+def test_an_extra_folder_joins_the_pool_as_a_series_of_its_own(tmp_path, capsys):
+    """``--extra-data``: every shard of another folder (another object set's series) joins the pool and gives its
+    own last scenes to the validation split; a shard name two folders share, or an empty folder, is refused."""
+    from shelf_env.privileged import dataset
+
+    data, wide = tmp_path / "data", tmp_path / "wide"
+    corridor_shards(data, shards=2)
+    corridor_shards(wide, shards=1, seed=1, series=92, object_set="train-wide")
+    sets = fg.load_sets(data, 0.25, None, extra=[wide])
+    pool = dataset.load_dataset(data) + dataset.load_dataset(wide)
+    train, val, _ = fr.split_teacher_shards(pool, 0.25)
+    assert th_equal(sets.train.obs, train.obs) and th_equal(sets.val.obs, val.obs)
+    # 16 scenes of series 0 give 4 to validation, the extra series' 8 give 2: each series apart
+    assert len(sets.val.obs) == (4 + 2) * 5 and len(sets.train.obs) == (12 + 6) * 5
+    alone = fg.load_sets(data, 0.25, None)
+    assert len(alone.val.obs) == 4 * 5 and th_equal(sets.val.obs[:20], alone.val.obs)
+    clash = tmp_path / "clash"
+    corridor_shards(clash, shards=1, seed=2)  # s00_00000 again
+    with pytest.raises(ValueError, match="shard s00_00000.npz is also in"):
+        fg.load_sets(data, 0.25, None, extra=[clash])
+    (tmp_path / "empty").mkdir()
+    args = ["features", "--data", str(data), "--val-fraction", "0.25", "--out", str(tmp_path / "f.npz")]
+    assert fg.main([*args, "--extra-data", str(tmp_path / "empty")]) == 2
+    assert "no dataset shards" in capsys.readouterr().err and not (tmp_path / "f.npz").exists()
+    assert fg.main([*args, "--extra-data", str(wide)]) == 0
+    assert json.loads(capsys.readouterr().out)["val_labels"] == len(val.label)
 
 
 def th_equal(a, b) -> bool:
