@@ -62,7 +62,7 @@ class TrainConfig:
     primitives: tuple[str, ...] = ("pick", "push")
     # heightmap cell size in metres (0.01: 40 x 60 cells; the paper's 0.005: 80 x 120)
     pixel_size: float = 0.01
-    # training objects ("train") or the unseen YCB set ("ycb")
+    # training objects ("train"), the wide training objects ("train-wide", an option) or the unseen YCB set ("ycb")
     object_set: str = "train"
     # the env's safe_picks (shelf_env.conditions.safe_picks): the mask leaves out picks whose carry is blocked
     safe_picks: bool = False
