@@ -119,6 +119,9 @@ def _pool(data: pathlib.Path, max_shards: str | None, fresh: str | None, fresh_a
 
 #: The groups of N that `greedy_report` breaks its invalid picks down by.
 N_GROUPS = ((3, 6), (7, 10), (11, 14))
+#: The edges (metres) of the picked object's observed height (``object_max_height``) that `greedy_report` breaks its
+#: invalid picks down by: under 6 cm, 6-9, 9-12, 12 cm and over (the training objects stop at 12 cm).
+HEIGHT_EDGES = (0.06, 0.09, 0.12)
 
 
 def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None,
@@ -130,7 +133,8 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
     validation split of `load_sets` (every state with ``all_states``: a probe set no model read), and, for contrast,
     every other labelled pick of the same states; ``extra`` folders join the pool as in `load_sets`. Per set: the
     picks and the invalid ones per group of N (`N_GROUPS`); per risk and set: the AUC, the invalid share and count
-    per band of the risk (edges ``bands``), and the share of the invalid picks at or over each risk's threshold."""
+    per band of the risk (edges ``bands``), and the share of the invalid picks at or over each risk's threshold.
+    Per set also the picks and invalid ones per band of the picked object's observed height (`HEIGHT_EDGES`)."""
     from shelf_env.training.distill import split_by_scene
 
     if not 0 < val_fraction < 1:
@@ -161,9 +165,12 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
             entry["by_n"] = {f"{lo}-{hi}": {"picks": int(((n >= lo) & (n <= hi)).sum()),
                                             "invalid": int(y[(n >= lo) & (n <= hi)].sum())}
                              for lo, hi in N_GROUPS}
+        x = split_features(split, True)  # a risk without the blocker features reads the first columns
+        height = np.digitize(x[:, FEATURES.index("object_max_height")], HEIGHT_EDGES)
+        entry["by_height"] = {label: {"picks": int((height == b).sum()), "invalid": int(y[height == b].sum())}
+                              for b, label in enumerate(height_labels())}
         for name, risk in models.items():
-            need = bool(risk.blockers)
-            r = risk.model.risk(split_features(split, need))
+            r = risk.model.risk(x if risk.blockers else x[:, :len(FEATURES)])
             band = np.digitize(r, edges[1:-1])
             entry[name] = {"auc": fall_risk.auc(y.astype(np.float64), r) if 0 < y.sum() < len(y) else float("nan"),
                            "bands": [{"picks": int((band == b).sum()), "invalid": int(y[band == b].sum())}
@@ -172,6 +179,12 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
                            "masked_at_threshold": float((r >= risk.threshold).mean()) if len(r) else 0.0}
         out[set_name] = entry
     return out
+
+
+def height_labels(edges: Sequence[float] = HEIGHT_EDGES) -> list[str]:
+    """Names of the height bands of ``edges`` in centimetres: ``["<6", "6-9", "9-12", ">=12"]``."""
+    cm = [f"{100 * e:g}" for e in edges]
+    return [f"<{cm[0]}", *(f"{a}-{b}" for a, b in zip(cm, cm[1:])), f">={cm[-1]}"]
 
 
 def probe(out: pathlib.Path, hours: float, model: str, series: int = 90, object_set: str = "ycb") -> int:

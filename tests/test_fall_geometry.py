@@ -323,6 +323,13 @@ def test_the_greedy_report_reads_the_driving_policy_s_picks_in_the_validation_sp
     assert sum(b["picks"] for b in bands) == len(y) and sum(b["invalid"] for b in bands) == y.sum()
     assert greedy["a"]["bands"][-1]["picks"] == int((r >= 0.1).sum())  # the last band: at or over 0.1
     assert greedy["a"]["masked_at_threshold"] == pytest.approx((r >= 0.3).mean())
+    # by the picked object's observed height: the crafted objects are 4, 10 and 14 cm tall
+    height = fg.split_features(greedy_split, True)[:, ff.FEATURES.index("object_max_height")]
+    by_height = greedy["by_height"]
+    assert list(by_height) == ["<6", "6-9", "9-12", ">=12"] and by_height["6-9"] == {"picks": 0, "invalid": 0}
+    assert by_height[">=12"] == {"picks": int((height >= 0.12).sum()), "invalid": int(y[height >= 0.12].sum())}
+    assert sum(v["picks"] for v in by_height.values()) == len(y) and sum(
+        v["invalid"] for v in by_height.values()) == y.sum() and by_height["<6"]["picks"] > 0
     with pytest.raises(ValueError, match="no shard of series 's07'"):
         fg.greedy_report(data, 0.25, None, None, None, "s07", {"a": risk_path})
     with pytest.raises(ValueError, match="source must be one of"):

@@ -5,7 +5,7 @@
 # wide refit beside the shipped risk and the refit on the test set, the YCB probe and the wide series' validation
 # scenes; then, by the page's rule, the wide refit as the shipped policy's filter at 0.1 on the validation scenes,
 # and on issue 10's held-out scenes if it passes there.
-# Usage: bash results/wide_objects/run.sh [collect|features|fit|export|greedy_ycb|greedy_wide|val|all]
+# Usage: bash results/wide_objects/run.sh [collect|features|fit|export|greedy_ycb|greedy_wide|greedy_train|val|all]
 #        ... open|closed|falls   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -59,6 +59,10 @@ fi
 if [[ $step == greedy_wide || $step == all ]]; then
   # the three risks on the wide series' validation scenes (the wide refit did not train on them)
   python -m research.fall_geometry greedy "${split[@]}" --series s92,s93 "${risks[@]}" --out "$out/greedy_wide.json"
+fi
+if [[ $step == greedy_train || $step == all ]]; then
+  # (added after the YCB numbers) the three risks on series 5's validation split: training objects, the same driver
+  python -m research.fall_geometry greedy "${split[@]}" --series s05 "${risks[@]}" --out "$out/greedy_train.json"
 fi
 if [[ $step == val ]]; then
   # only if the page's reading says the wide refit carries better (validation: seeds 2000-2002, N = 5, 8, 11)
