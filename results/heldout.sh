@@ -1,4 +1,4 @@
-# The validation and held-out steps shared by the experiments' run.sh (sourced, not run): `validate`, `after_validation`
+# The steps shared by the experiments' run.sh (sourced, not run): `geometry_refit`, `validate`, `after_validation`
 # (below) and `heldout`: a candidate policy that passed validation,
 # played on issue 10's held-out scenes beside the shipped policy and the baselines, whose cells are copied from an
 # earlier evaluation folder (--reuse-cells checks them by label and, for checkpoints, by file digest). Run from the
@@ -63,4 +63,27 @@ after_validation() {
       echo "after_validation: the step is open, closed or falls, got '$step'" >&2
       return 2 ;;
   esac
+}
+
+# geometry_refit STEP OUT NAME SPLIT...: round two's geometry fall-model recipe on the split SPLIT (research.fall_geometry
+# options: --data, --max-shards, --fresh, ...). features: the 36 features with the blocker features -> OUT/features.npz;
+# fit: the MLP and logistic regression beside the shipped risk (examples/pretrained/p_s.geometry_risk.pt) ->
+# OUT/fit.json, OUT/fit.models.pt; export: the shipped p_s.zip copied to OUT/NAME.zip and the fit's MLP at the shipped
+# threshold 0.1 -> OUT/NAME.geometry_risk.pt (a filter for it). Each step skips a file already on disk; "all" runs
+# the three.
+geometry_refit() {
+  local step=$1 out=$2 name=$3
+  shift 3
+  if [[ $step == features || $step == all ]]; then
+    [ -f "$out/features.npz" ] || python -m research.fall_geometry features "$@" --blockers --out "$out/features.npz"
+  fi
+  if [[ $step == fit || $step == all ]]; then
+    [ -f "$out/fit.json" ] || python -m research.fall_geometry fit "$@" --features "$out/features.npz" \
+        --compare examples/pretrained/p_s.geometry_risk.pt --out "$out/fit.json"
+  fi
+  if [[ $step == export || $step == all ]]; then
+    cp -p examples/pretrained/p_s.zip "$out/$name.zip"
+    [ -f "$out/$name.geometry_risk.pt" ] || python -m research.fall_geometry export --models "$out/fit.models.pt" \
+        --name mlp --features "$out/features.npz" --threshold 0.1 --out "$out/$name.geometry_risk.pt"
+  fi
 }

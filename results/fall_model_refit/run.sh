@@ -25,18 +25,8 @@ ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results
 others=("$ref=examples/pretrained/p_s.zip" examples/pretrained/s.zip h-d h-a)
 split=(--data data/teacher --max-shards "$pool" --val-fraction 0.2 --fresh "$fresh" --fresh-after "$after")
 step=${1:-all}
-if [[ $step == features || $step == all ]]; then
-  [ -f "$out/features.npz" ] || python -m research.fall_geometry features "${split[@]}" --blockers \
-      --out "$out/features.npz"
-fi
-if [[ $step == fit || $step == all ]]; then
-  [ -f "$out/fit.json" ] || python -m research.fall_geometry fit "${split[@]}" --features "$out/features.npz" \
-      --compare "$shipped_risk" --out "$out/fit.json"
-fi
-if [[ $step == export || $step == all ]]; then
-  cp -p examples/pretrained/p_s.zip "$out/p_s_georefit.zip"
-  [ -f "$out/p_s_georefit.geometry_risk.pt" ] || python -m research.fall_geometry export --models "$out/fit.models.pt" \
-      --name mlp --features "$out/features.npz" --threshold 0.1 --out "$out/p_s_georefit.geometry_risk.pt"
+if [[ $step == features || $step == fit || $step == export || $step == all ]]; then
+  geometry_refit "$step" "$out" p_s_georefit "${split[@]}"  # results/heldout.sh
 fi
 if [[ $step == val || $step == all ]]; then
   # validation: seeds 2000-2002, N = 5, 8, 11; the shipped policy's cells from results/push_guard/val90

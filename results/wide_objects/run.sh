@@ -38,18 +38,8 @@ if [[ $step == collect ]]; then
   done
   wait
 fi
-if [[ $step == features || $step == all ]]; then
-  [ -f "$out/features.npz" ] || python -m research.fall_geometry features "${split[@]}" --blockers \
-      --out "$out/features.npz"
-fi
-if [[ $step == fit || $step == all ]]; then
-  [ -f "$out/fit.json" ] || python -m research.fall_geometry fit "${split[@]}" --features "$out/features.npz" \
-      --compare "$shipped_risk" --out "$out/fit.json"
-fi
-if [[ $step == export || $step == all ]]; then
-  cp -p examples/pretrained/p_s.zip "$out/p_s_geowide.zip"
-  [ -f "$wide_risk" ] || python -m research.fall_geometry export --models "$out/fit.models.pt" --name mlp \
-      --features "$out/features.npz" --threshold 0.1 --out "$wide_risk"
+if [[ $step == features || $step == fit || $step == export || $step == all ]]; then
+  geometry_refit "$step" "$out" p_s_geowide "${split[@]}"  # results/heldout.sh
 fi
 if [[ $step == greedy_ycb || $step == all ]]; then
   # the three risks on the YCB probe's greedy picks and other picks, every state
