@@ -18,6 +18,7 @@ import numpy as np
 
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from shelf_env.camera.heightmap import CLASS_RGB, REGION_RGB
+from shelf_env.world.objects import OBJECT_SETS
 
 
 def scripted_pick(obs: np.ndarray) -> int:
@@ -51,7 +52,7 @@ def side_by_side(scene: np.ndarray, obs: np.ndarray) -> np.ndarray:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--num-objects", type=int, default=5)
-    ap.add_argument("--object-set", default="train", choices=["train", "ycb"])
+    ap.add_argument("--object-set", default="train", choices=list(OBJECT_SETS))
     ap.add_argument("--steps", type=int, default=8)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="docs/scene_and_heightmap.png")
