@@ -99,11 +99,7 @@ def test_wide_training_set_spans_the_test_sets_ranges_with_the_same_draws():
 
 
 def test_env_spawns_a_full_wide_scene():
-    import gymnasium as gym
-
-    import shelf_env  # noqa: F401  (registers ShelfSort-v0)
-
-    env = gym.make("ShelfSort-v0", num_objects=14, object_set="train-wide").unwrapped
+    env = ShelfSortEnv(num_objects=14, object_set="train-wide")
     try:
         env.reset(seed=5)
         world = env.world
