@@ -16,11 +16,14 @@ would hit (`BLOCKER_FEATURES`). The features, the model and the filter are the p
 - `channels`: the fall model's recipe with the features as more input channels (`feature_channels`);
 - `export`: a fitted model as a per-cell risk (`GeometryRisk`) beside a checkpoint, which
   ``<zip>+geometry-filter`` plays under `shelf_env.fall_filter.FallFilter` (registered by `shelf_env.policies`);
-- `greedy`: exported risks on the picks a driving policy made (`greedy_report`; docs/experiments/fall-model-refit.md);
-- `probe`: a probe set of unseen-object scenes in a folder of its own, never the teacher dataset (`probe`).
+- `greedy`: exported risks on the picks a driving policy made, by N and by the picked object's height
+  (`greedy_report`; docs/experiments/fall-model-refit.md, docs/experiments/wide-objects.md);
+- `probe`: a set of another object set's scenes (unseen YCB objects, or the `train-wide` objects) in a folder of its
+  own, never the teacher dataset (`probe`).
 
 ``features``, ``fit``, ``channels`` and ``greedy`` take ``--fresh-after``, so that a refit on a grown dataset keeps an
-older test set that sits inside ``--max-shards``.
+older test set that sits inside ``--max-shards``, and ``--extra-data``, a folder (such as a probe's) whose shards join
+the pool as series of their own.
 
 Measured: round two's MLP ranks the falls at AUC 0.902 on validation and 0.926 on the test set (the fall
 model 0.866 / 0.897); as a mask at 0.1 on the shipped P+S it sorted 113 of the 270 validation scenes against
