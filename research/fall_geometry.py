@@ -18,6 +18,8 @@ would hit (`BLOCKER_FEATURES`). The features, the model and the filter are the p
   ``<zip>+geometry-filter`` plays under `shelf_env.fall_filter.FallFilter` (registered by `shelf_env.policies`);
 - `greedy`: exported risks on the picks a driving policy made, by N and by the picked object's height
   (`greedy_report`; docs/experiments/fall-model-refit.md, docs/experiments/wide-objects.md);
+- `kinds`: the kinds of object a driving policy's picks took and the kinds that fell, by replaying the shards' scenes
+  (`kinds_report`; docs/experiments/ycb-kinds.md);
 - `probe`: a set of another object set's scenes (unseen YCB objects, or the `train-wide` objects) in a folder of its
   own, never the teacher dataset (`probe`).
 
@@ -138,21 +140,8 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
     picks and the invalid ones per group of N (`N_GROUPS`); per risk and set: the AUC, the invalid share and count
     per band of the risk (edges ``bands``), and the share of the invalid picks at or over each risk's threshold.
     Per set also the picks and invalid ones per band of the picked object's observed height (`HEIGHT_EDGES`)."""
-    from shelf_env.training.distill import split_by_scene
-
-    if not 0 < val_fraction < 1:
-        raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
     models = {name: GeometryRisk.load(path) for name, path in risks.items()}
-    shards, _ = _pool(data, max_shards, fresh, fresh_after, extra)
-    prefixes = tuple(f"{name.strip()}_" for name in series.split(","))
-    chosen = [s for s in shards if s.path.name.startswith(prefixes)]
-    if not chosen:
-        raise ValueError(f"no shard of series {series!r} among --max-shards {max_shards}")
-    # split_by_scene holds out the last scenes of each series apart, so the chosen series' split is the pool's
-    states = (np.arange(sum(s.num_states for s in chosen)) if all_states
-              else np.array(split_by_scene(chosen, val_fraction)[1], np.int64))
-    if len(states) == 0:
-        raise ValueError(f"series {series} has no state in the validation split")
+    chosen, states = series_states(data, val_fraction, max_shards, fresh, fresh_after, series, all_states, extra)
     picks = {"greedy": fall_risk.teacher_split(chosen, states, source="greedy")}
     every = fall_risk.teacher_split(chosen, states)
     picks["others"] = _without(every, picks["greedy"])
@@ -182,6 +171,167 @@ def greedy_report(data: pathlib.Path, val_fraction: float, max_shards: str | Non
                            "masked_at_threshold": float((r >= risk.threshold).mean()) if len(r) else 0.0}
         out[set_name] = entry
     return out
+
+
+def series_states(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None,
+                  fresh_after: str | None, series: str, all_states: bool = False,
+                  extra: Sequence[pathlib.Path] = ()) -> tuple[list[Any], np.ndarray]:
+    """The shards of ``series`` (one or several, ``"s90,s91"``) in the pool of `load_sets` and the indices (over
+    those shards in order) of their states in its validation split, or of every state with ``all_states``."""
+    from shelf_env.training.distill import split_by_scene
+
+    if not 0 < val_fraction < 1:
+        raise ValueError(f"need 0 < val_fraction < 1, got {val_fraction}")
+    shards, _ = _pool(data, max_shards, fresh, fresh_after, extra)
+    prefixes = tuple(f"{name.strip()}_" for name in series.split(","))
+    chosen = [s for s in shards if s.path.name.startswith(prefixes)]
+    if not chosen:
+        raise ValueError(f"no shard of series {series!r} among --max-shards {max_shards}")
+    # split_by_scene holds out the last scenes of each series apart, so the chosen series' split is the pool's
+    states = (np.arange(sum(s.num_states for s in chosen)) if all_states
+              else np.array(split_by_scene(chosen, val_fraction)[1], np.int64))
+    if len(states) == 0:
+        raise ValueError(f"series {series} has no state in the validation split")
+    return chosen, states
+
+
+def kinds_report(data: pathlib.Path, val_fraction: float, max_shards: str | None, fresh: str | None,
+                 fresh_after: str | None, series: str, all_states: bool = False, extra: Sequence[pathlib.Path] = (),
+                 rate: float = 0.053) -> dict[str, Any]:
+    """Which kinds of object the picks of ``series``' states (chosen as `greedy_report` does) took, and which
+    kinds fell: each episode is replayed from its reset seed through its executed actions, and at each chosen
+    state whose replayed observation equals the stored one bit for bit (the others are counted and left out)
+    each labelled pick's kind is the kind of the object under its cell in the env's observed semantic map.
+    Every invalid greedy pick is stepped again in a forked copy (`_step_in_copy`) for the kinds that left the
+    cabinet and those left not at rest. Per kind: the states it is in, its greedy picks and other picks and how
+    many ended invalid, and its excess over ``rate`` (the training objects' greedy invalid share), ``invalid -
+    rate * picks``, with the one-sided binomial p of that many or more (docs/experiments/ycb-kinds.md)."""
+    if not 0 < rate < 1:
+        raise ValueError(f"need 0 < rate < 1, got {rate}")
+    chosen, states = series_states(data, val_fraction, max_shards, fresh, fresh_after, series, all_states, extra)
+    kinds: dict[str, dict[str, Any]] = {}
+    invalid_greedy: list[dict[str, Any]] = []
+    replayed = mismatched = first = 0
+    for shard in chosen:
+        mine = states[(states >= first) & (states < first + shard.num_states)] - first
+        first += shard.num_states
+        if len(mine):
+            done, differ = _replay_kinds(shard, mine, kinds, invalid_greedy)
+            replayed, mismatched = replayed + done, mismatched + differ
+    for entry in kinds.values():
+        g = entry["greedy"]
+        entry["excess"] = g["invalid"] - rate * g["picks"]
+        entry["p_above_rate"] = binomial_tail(g["invalid"], g["picks"], rate)
+    total = sum(max(e["excess"], 0.0) for e in kinds.values())
+    ranked = sorted(kinds, key=lambda k: -kinds[k]["excess"])
+    top = ranked[:2]
+    share = sum(max(kinds[k]["excess"], 0.0) for k in top) / total if total > 0 else float("nan")
+    concentrated = bool(total > 0 and share >= 0.6 and all(kinds[k]["p_above_rate"] < 0.05 for k in top))
+    picked = sum(r["picked_left"] for r in invalid_greedy)
+    return {"series": series, "all_states": all_states, "states": int(len(states)), "replayed": replayed,
+            "mismatched": mismatched, "rate": rate,
+            "greedy": {"picks": sum(e["greedy"]["picks"] for e in kinds.values()),
+                       "invalid": sum(e["greedy"]["invalid"] for e in kinds.values())},
+            "kinds": {k: kinds[k] for k in ranked}, "positive_excess": total, "top_two": top,
+            "top_two_share": share, "reading": "concentrated" if concentrated else "spread",
+            "invalid_greedy": invalid_greedy,
+            "picked_object_left": {"picks": len(invalid_greedy), "picked_left": picked,
+                                   "other_left": sum(bool(set(r["left_uids"]) - {r["uid"]}) for r in invalid_greedy),
+                                   "nothing_left": sum(not r["left_uids"] for r in invalid_greedy)}}
+
+
+def binomial_tail(k: int, n: int, p: float) -> float:
+    """P(X >= k) for X ~ Binomial(n, p)."""
+    from math import comb
+
+    return float(min(1.0, sum(comb(n, i) * p**i * (1 - p) ** (n - i) for i in range(k, n + 1))))
+
+
+def _replay_kinds(shard: Any, mine: np.ndarray, kinds: dict[str, dict[str, Any]],
+                  invalid_greedy: list[dict[str, Any]]) -> tuple[int, int]:
+    """`kinds_report` on one shard's states ``mine`` (local indices): tallies into ``kinds``, a record per invalid
+    greedy pick into ``invalid_greedy``; returns (states replayed, states whose observation differed)."""
+    from shelf_env.privileged import dataset
+
+    a = shard.arrays
+    greedy_source = dataset.SOURCES.index("greedy")
+    env = dataset.replay_env(shard)
+    base: Any = env.unwrapped
+    replayed = differ = 0
+    try:
+        for i, ep in enumerate(shard.meta["episodes"]):
+            here = [int(s) for s in mine if a["state_episode"][s] == i]
+            if not here:
+                continue
+            base.set_num_objects(ep["num_objects"])
+            obs, _ = env.reset(seed=ep["reset_seed"])
+            t = 0
+            for s in sorted(here, key=lambda s: int(a["state_step"][s])):
+                while t < int(a["state_step"][s]):
+                    obs, *_ = env.step(ep["actions"][t])
+                    t += 1
+                replayed += 1
+                if not np.array_equal(obs, a["obs"][s]):
+                    differ += 1
+                    continue
+                for kind in {o.spec.kind for o in base.world.objects}:
+                    _kind_entry(kinds, kind)["states"] += 1
+                labels = np.flatnonzero(a["label_state"] == s)
+                greedy = {int(a["label_action"][k]) for k in labels if a["label_source"][k] == greedy_source}
+                seen: set[tuple[int, bool]] = set()
+                for k in labels:
+                    action, is_greedy = int(a["label_action"][k]), bool(a["label_source"][k] == greedy_source)
+                    if (base.decode_action(action)[0] != "pick" or (not is_greedy and action in greedy)
+                            or (action, is_greedy) in seen):
+                        continue
+                    seen.add((action, is_greedy))
+                    uid, kind = picked_object(base, action)
+                    invalid = not bool(a["label_valid"][k])
+                    tally = _kind_entry(kinds, kind)["greedy" if is_greedy else "others"]
+                    tally["picks"] += 1
+                    tally["invalid"] += int(invalid)
+                    if is_greedy and invalid:
+                        copy = _step_in_copy(env, action)
+                        invalid_greedy.append({"shard": shard.path.name, "state": s, "num_objects": ep["num_objects"],
+                                               "kind": kind, "uid": uid, **copy,
+                                               "picked_left": uid in copy["left_uids"]})
+    finally:
+        env.close()
+    return replayed, differ
+
+
+def picked_object(env: Any, action: int) -> tuple[int, str]:
+    """The uid and kind of the object a pick ``action`` meets in ``env``'s current state: the object under its cell
+    in the env's observed semantic map (what the camera shows there, which the cup meets first); ``(-1, "none")``
+    where the cell shows no object. ValueError for an action that is not a pick."""
+    base = env.unwrapped
+    name, row, col = base.decode_action(action)
+    if name != "pick":
+        raise ValueError(f"action {action} is not a pick (it is a {name})")
+    uid = int(base._observed_semantic()[0][row, col])
+    kind = {o.uid: o.spec.kind for o in base.world.objects}.get(uid)
+    return (uid, kind) if kind is not None else (-1, "none")
+
+
+def _kind_entry(kinds: dict[str, dict[str, Any]], kind: str) -> dict[str, Any]:
+    return kinds.setdefault(kind, {"states": 0, "greedy": {"picks": 0, "invalid": 0},
+                                   "others": {"picks": 0, "invalid": 0}})
+
+
+def _step_in_copy(env: Any, action: int) -> dict[str, Any]:
+    """``action`` stepped in a forked copy of ``env`` (`shelf_env.privileged.lookahead.in_fork`): the uids and
+    kinds of the objects that left the cabinet, the kinds of those inside left not at rest, and the step's flags."""
+    from shelf_env.privileged.lookahead import in_fork
+
+    def work(base: Any) -> dict[str, Any]:
+        before = {o.uid: o.spec.kind for o in base.world.objects}
+        outcome = base.step_outcome(int(action))
+        inside = {o.uid for o in base.world.objects}  # the env removes what left the cabinet
+        left = sorted(uid for uid in before if uid not in inside)
+        return {"left_uids": left, "left": [before[uid] for uid in left], "fell": outcome["fell"],
+                "not_at_rest": [o.spec.kind for o, rest in zip(base.world.objects, base.world.at_rest()) if not rest]}
+
+    return in_fork(env, work, f"stepping action {action}")
 
 
 def height_labels(edges: Sequence[float] = HEIGHT_EDGES) -> list[str]:
@@ -574,17 +724,22 @@ def main(argv: list[str] | None = None) -> int:
             p.add_argument("--compare", type=pathlib.Path, default=None,
                            help="an exported geometry risk (.geometry_risk.pt) scored beside the fit (compare_risk)")
     g = sub.add_parser("greedy", help="exported risks on the picks a driving policy made (greedy_report)")
-    g.add_argument("--data", type=pathlib.Path, required=True)
-    g.add_argument("--max-shards", default=None)
-    g.add_argument("--val-fraction", type=float, default=0.2)
-    g.add_argument("--fresh", default=None, help="the test set left out of the split (as `features`)")
-    g.add_argument("--fresh-after", default=None, help="as `features`")
-    g.add_argument("--extra-data", type=pathlib.Path, action="append", default=[], help="as `features`")
-    g.add_argument("--series", required=True, help="the series whose greedy picks are read (s05; s90,s91)")
+    k = sub.add_parser("kinds", help="the kinds of object the picks took and that fell, by replay (kinds_report)")
+    for q in (g, k):
+        q.add_argument("--data", type=pathlib.Path, required=True)
+        q.add_argument("--max-shards", default=None)
+        q.add_argument("--val-fraction", type=float, default=0.2)
+        q.add_argument("--fresh", default=None, help="the test set left out of the split (as `features`)")
+        q.add_argument("--fresh-after", default=None, help="as `features`")
+        q.add_argument("--extra-data", type=pathlib.Path, action="append", default=[], help="as `features`")
+        q.add_argument("--series", required=True, help="the series whose greedy picks are read (s05; s90,s91)")
+        q.add_argument("--all-states", action="store_true",
+                       help="every state, not the validation split (a probe set)")
+        q.add_argument("--out", type=pathlib.Path, required=True, help="the report (JSON)")
     g.add_argument("--risk", action="append", required=True, metavar="NAME=PATH",
                    help="an exported geometry risk (.geometry_risk.pt), repeatable")
-    g.add_argument("--all-states", action="store_true", help="every state, not the validation split (a probe set)")
-    g.add_argument("--out", type=pathlib.Path, required=True, help="the report (JSON)")
+    k.add_argument("--rate", type=float, default=0.053,
+                   help="the greedy picks' invalid share a kind's excess is counted over (training objects': 0.053)")
     pr = sub.add_parser("probe", help="a probe set of unseen-object scenes for measuring fall models (probe)")
     pr.add_argument("--out", type=pathlib.Path, required=True, help="its own folder (never the teacher dataset)")
     pr.add_argument("--hours", type=float, required=True, help="wall-clock budget; a shard under way is finished")
@@ -623,6 +778,13 @@ def main(argv: list[str] | None = None) -> int:
             write_json_atomically(args.out, result)
             print(json.dumps({k: {n: v[n]["auc"] for n in risk_files} | {"picks": v["picks"], "invalid": v["invalid"]}
                               for k, v in result.items() if k in ("greedy", "others")}))
+            return 0
+        if args.command == "kinds":
+            result = kinds_report(args.data, args.val_fraction, args.max_shards, args.fresh, args.fresh_after,
+                                  args.series, args.all_states, args.extra_data, args.rate)
+            write_json_atomically(args.out, result)
+            print(json.dumps({key: result[key] for key in ("states", "mismatched", "greedy", "top_two",
+                                                           "top_two_share", "reading", "picked_object_left")}))
             return 0
         if args.command == "probe":
             print(json.dumps({"shards_written": probe(args.out, args.hours, args.model, args.series,

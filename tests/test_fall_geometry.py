@@ -15,6 +15,7 @@ from shelf_env import fall_filter as ff
 from shelf_env.camera.heightmap import CLASS_RGB
 from shelf_env.conditions.safe_picks import Z_CARRY
 from shelf_env.fall_filter import geometry_features, geometry_risk_path
+from shelf_env.world.objects import YCB_KINDS
 from tests.test_fall_filter import crafted, paint
 
 
@@ -361,3 +362,76 @@ def test_a_probe_of_unseen_objects_never_shares_a_folder_with_training_objects(t
     assert json.loads(capsys.readouterr().out) == {"shards_written": 0} and (tmp_path / "probe").is_dir()
     assert fg.main(["probe", "--out", str(data), "--hours", "1", "--model", model]) == 2
     assert "a ycb probe goes in a folder of its own" in capsys.readouterr().err
+
+
+def test_a_replay_names_the_picked_object_and_what_left_the_cabinet():
+    """`picked_object` is the object a pick moves, and `_step_in_copy` names the object a carry dragged out: the
+    crafted drag of tests/test_closed_loop.py (a tall box picked from behind a light one near the opening)."""
+    from shelf_env.world.objects import ObjectSpec
+    from tests.test_lookahead import DRAG_REGIONS
+
+    env = gym.make("ShelfSort-v0", num_objects=2).unwrapped
+    try:
+        scene = [(ObjectSpec("back_box", "box", (0.05, 0.05, 0.14), 0.3), 0, 0.30, 0.05, 0.0),
+                 (ObjectSpec("front_box", "box", (0.05, 0.05, 0.10), 0.15), 1, 0.06, 0.05, 0.0)]
+        env.set_scene(scene, DRAG_REGIONS)
+        back, front = (o.uid for o in env.world.objects)
+        pick_back = env.codec.action_at("pick", 0.30, 0.05)
+        pick_front = env.codec.action_at("pick", 0.06, 0.05)
+        assert env.action_masks()[pick_back] and env.action_masks()[pick_front]
+        assert fg.picked_object(env, pick_back) == (back, "back_box")
+        assert fg.picked_object(env, pick_front) == (front, "front_box")
+        free = env.codec.action_at("pick", 0.20, -0.25)
+        assert fg.picked_object(env, free) == (-1, "none")  # no object under that cell
+        with pytest.raises(ValueError, match="not a pick"):
+            fg.picked_object(env, env.codec.action_at("push_left", 0.30, 0.05))
+        dragged = fg._step_in_copy(env, pick_back)
+        assert dragged["fell"] and dragged["left_uids"] == [front] and dragged["left"] == ["front_box"]
+        assert len(env.world.objects) == 2  # the copy stepped, not the env
+        before = env.world.positions()
+        env.step(pick_back)  # the real step drags the same box out
+        assert [o.uid for o in env.world.objects] == [back] and not np.allclose(env.world.positions(), before[:1])
+    finally:
+        env.close()
+
+
+def test_the_kinds_report_tallies_every_pick_of_a_replayed_shard_by_the_object_under_it(tmp_path, capsys):
+    """`kinds_report` on a shard collected here: every state replays bit for bit, every pick label is counted
+    once under the kind of the object its replayed cell shows, and the excess and binomial tail follow the rate."""
+    from shelf_env.privileged import dataset
+
+    data = tmp_path / "probe"
+    assert dataset.collect(data, hours=1.0, ns=(3,), model_path="examples/pretrained/p_s.zip", episodes_per_shard=2,
+                           max_shards=1, explore=1.0, max_probes=4, object_set="ycb") == 1
+    report = fg.kinds_report(data, 0.2, None, None, None, "s00", all_states=True, rate=0.1)
+    (shard,) = dataset.load_dataset(data)
+    a = shard.arrays
+    assert report["states"] == report["replayed"] == shard.num_states and report["mismatched"] == 0
+    pick = a["label_action"] // (a["obs"].shape[-1] * a["obs"].shape[-2]) == 0
+    greedy = a["label_source"] == dataset.SOURCES.index("greedy")
+    kinds = report["kinds"]
+    assert set(kinds) <= set(YCB_KINDS)  # every pick cell showed an object
+    assert sum(k["greedy"]["picks"] for k in kinds.values()) == report["greedy"]["picks"] == (pick & greedy).sum()
+    assert sum(k["greedy"]["invalid"] for k in kinds.values()) == (pick & greedy & ~a["label_valid"]).sum()
+    others = {(int(s), int(act)) for s, act, g in zip(a["label_state"][pick], a["label_action"][pick], greedy[pick])
+              if not g} - {(int(s), int(act)) for s, act in zip(a["label_state"][pick & greedy],
+                                                                a["label_action"][pick & greedy])}
+    assert sum(k["others"]["picks"] for k in kinds.values()) == len(others) > 0
+    # each state is counted once for each kind in its scene: 3 objects of 1 to 3 kinds
+    assert shard.num_states <= sum(k["states"] for k in kinds.values()) <= 3 * shard.num_states
+    for k in kinds.values():
+        g = k["greedy"]
+        assert k["excess"] == pytest.approx(g["invalid"] - 0.1 * g["picks"])
+        assert k["p_above_rate"] == pytest.approx(fg.binomial_tail(g["invalid"], g["picks"], 0.1))
+    assert len(report["invalid_greedy"]) == report["greedy"]["invalid"]
+    assert fg.binomial_tail(0, 5, 0.3) == pytest.approx(1.0)
+    assert fg.binomial_tail(2, 2, 0.3) == pytest.approx(0.09)
+    assert fg.binomial_tail(1, 3, 0.5) == pytest.approx(7 / 8)
+    out = tmp_path / "kinds.json"
+    assert fg.main(["kinds", "--data", str(data), "--series", "s00", "--all-states", "--rate", "0.1",
+                    "--out", str(out)]) == 0
+    assert json.loads(out.read_text()) == json.loads(json.dumps(report))
+    assert json.loads(capsys.readouterr().out.splitlines()[-1])["mismatched"] == 0  # after the collector's lines
+    assert fg.main(["kinds", "--data", str(data), "--series", "s00", "--rate", "1.5", "--out",
+                    str(tmp_path / "bad.json")]) == 2
+    assert "need 0 < rate < 1" in capsys.readouterr().err and not (tmp_path / "bad.json").exists()
