@@ -20,6 +20,8 @@ would hit (`BLOCKER_FEATURES`). The features, the model and the filter are the p
   (`greedy_report`; docs/experiments/fall-model-refit.md, docs/experiments/wide-objects.md);
 - `kinds`: the kinds of object a driving policy's picks took and the kinds that fell, by replaying the shards' scenes
   (`kinds_report`; docs/experiments/ycb-kinds.md);
+- `carry`: whether the camera saw each greedy pick's carry as clear, by what the pick did in a `kinds` report
+  (`carry_view`);
 - `probe`: a set of another object set's scenes (unseen YCB objects, or the `train-wide` objects) in a folder of its
   own, never the teacher dataset (`probe`).
 
@@ -332,6 +334,59 @@ def _step_in_copy(env: Any, action: int) -> dict[str, Any]:
                 "not_at_rest": [o.spec.kind for o, rest in zip(base.world.objects, base.world.at_rest()) if not rest]}
 
     return in_fork(env, work, f"stepping action {action}")
+
+
+def carry_view(data: pathlib.Path, series: str, kinds: dict[str, Any],
+               risk: GeometryRisk | None = None) -> dict[str, Any]:
+    """Whether the camera saw each greedy pick's carry as clear (`shelf_env.conditions.safe_picks.carry_clear` on the
+    stored observation's blobs and heights, as `restrict_to_clear_carries` reads them), by what the pick did in the
+    `kinds_report` ``kinds`` of every state of ``series`` in ``data``: ``valid``, ``bystander`` (another object
+    left the cabinet), ``picked`` (only the picked object left) or ``moving`` (nothing left, an object kept moving).
+    With ``risk`` (an exported `GeometryRisk`, such as the shipped filter's) also each group's mean risk and the AUC
+    of the risk for each invalid group against the valid picks. A report with states that did not replay is refused:
+    its invalid picks' outcomes are unknown."""
+    from shelf_env.baselines.heuristics import ObservationView
+    from shelf_env.camera.heightmap import observed_height
+    from shelf_env.conditions.safe_picks import carry_clear
+    from shelf_env.privileged import dataset
+
+    if kinds.get("mismatched", 0) or not kinds.get("all_states"):
+        raise ValueError("carry_view needs a kinds report of every state, each replayed exactly (all_states, "
+                         f"mismatched 0); got all_states={kinds.get('all_states')}, "
+                         f"mismatched={kinds.get('mismatched')}")
+    outcome = {(r["shard"], int(r["state"])): ("bystander" if set(r["left_uids"]) - {r["uid"]} else
+                                              "picked" if r["picked_left"] else "moving")
+               for r in kinds["invalid_greedy"]}
+    groups = {name: {"picks": 0, "clear": 0} for name in ("valid", "bystander", "picked", "moving")}
+    risks: dict[str, list[float]] = {}
+    greedy_source = dataset.SOURCES.index("greedy")
+    prefixes = tuple(f"{name.strip()}_" for name in series.split(","))
+    for shard in (s for s in dataset.load_dataset(data) if s.path.name.startswith(prefixes)):
+        a = shard.arrays
+        width, cells = a["obs"].shape[-1], int(np.prod(a["obs"].shape[-2:]))
+        pick = list(shard.meta["layout"]["map_names"]).index("pick")
+        for k in np.flatnonzero((a["label_source"] == greedy_source) & (a["label_action"] // cells == pick)):
+            state, (row, col) = int(a["label_state"][k]), divmod(int(a["label_action"][k]) % cells, width)
+            key = (shard.path.name, state)
+            if not a["label_valid"][k] and key not in outcome:
+                raise ValueError(f"{shard.path.name} state {state}: an invalid greedy pick the kinds report lacks")
+            obs = a["obs"][state]
+            clear = carry_clear(ObservationView.from_observation(obs, 0).blob, observed_height(obs),
+                                shard.meta["layout"]["pixel_size"])
+            name = "valid" if a["label_valid"][k] else outcome[key]
+            groups[name]["picks"] += 1
+            groups[name]["clear"] += int(clear[row, col])
+            if risk is not None:
+                x = geometry_features(obs, np.array([row * width + col]), risk.blockers)
+                risks.setdefault(name, []).append(float(risk.model.risk(x)[0]))
+    out: dict[str, Any] = {"series": series, "groups": groups}
+    if risk is not None:
+        valid = np.array(risks.get("valid", []))
+        out["risk"] = {name: {"mean": float(np.mean(r)),
+                              "auc_against_valid": None if name == "valid" else fall_risk.auc(
+                                  np.r_[np.zeros(len(valid)), np.ones(len(r))], np.r_[valid, r])}
+                       for name, r in risks.items()}
+    return out
 
 
 def height_labels(edges: Sequence[float] = HEIGHT_EDGES) -> list[str]:
@@ -740,6 +795,13 @@ def main(argv: list[str] | None = None) -> int:
                    help="an exported geometry risk (.geometry_risk.pt), repeatable")
     k.add_argument("--rate", type=float, default=0.053,
                    help="the greedy picks' invalid share a kind's excess is counted over (training objects': 0.053)")
+    c = sub.add_parser("carry", help="whether the camera saw each greedy pick's carry as clear, by its outcome")
+    c.add_argument("--data", type=pathlib.Path, required=True)
+    c.add_argument("--series", required=True)
+    c.add_argument("--kinds", type=pathlib.Path, required=True, help="the `kinds` report of every state (JSON)")
+    c.add_argument("--risk", type=pathlib.Path, default=None,
+                   help="an exported geometry risk (.geometry_risk.pt) scored on the same picks")
+    c.add_argument("--out", type=pathlib.Path, required=True, help="the report (JSON)")
     pr = sub.add_parser("probe", help="a probe set of unseen-object scenes for measuring fall models (probe)")
     pr.add_argument("--out", type=pathlib.Path, required=True, help="its own folder (never the teacher dataset)")
     pr.add_argument("--hours", type=float, required=True, help="wall-clock budget; a shard under way is finished")
@@ -785,6 +847,16 @@ def main(argv: list[str] | None = None) -> int:
             write_json_atomically(args.out, result)
             print(json.dumps({key: result[key] for key in ("states", "mismatched", "greedy", "top_two",
                                                            "top_two_share", "reading", "picked_object_left")}))
+            return 0
+        if args.command == "carry":
+            if not args.kinds.is_file():
+                raise ValueError(f"--kinds {args.kinds} does not exist; make it with `kinds --all-states`")
+            if args.risk is not None and not args.risk.is_file():
+                raise ValueError(f"--risk {args.risk} does not exist")
+            result = carry_view(args.data, args.series, json.loads(args.kinds.read_text()),
+                                GeometryRisk.load(args.risk) if args.risk is not None else None)
+            write_json_atomically(args.out, result)
+            print(json.dumps(result["groups"]))
             return 0
         if args.command == "probe":
             print(json.dumps({"shards_written": probe(args.out, args.hours, args.model, args.series,

@@ -435,3 +435,74 @@ def test_the_kinds_report_tallies_every_pick_of_a_replayed_shard_by_the_object_u
     assert fg.main(["kinds", "--data", str(data), "--series", "s00", "--rate", "1.5", "--out",
                     str(tmp_path / "bad.json")]) == 2
     assert "need 0 < rate < 1" in capsys.readouterr().err and not (tmp_path / "bad.json").exists()
+
+
+def test_the_carry_view_reads_the_camera_s_clear_carries_by_what_each_greedy_pick_did(tmp_path, capsys):
+    """`carry_view` on the corridor shards, whose picks fall exactly when a taller-than-clearance object stands in
+    front of the picked one: every valid greedy pick's carry looks clear to the camera and no invalid one's does; the
+    outcome groups come from the kinds report's records, and a report with unreplayed states is refused."""
+    from shelf_env.privileged import dataset
+
+    data = tmp_path / "data"
+    corridor_shards(data, shards=1, episodes=4, greedy=True)
+    (shard,) = dataset.load_dataset(data)
+    a = shard.arrays
+    greedy = np.flatnonzero(a["label_source"] == dataset.SOURCES.index("greedy"))
+    invalid = [int(a["label_state"][k]) for k in greedy if not a["label_valid"][k]]
+    assert 0 < len(invalid) < len(greedy)
+    records = [{"shard": shard.path.name, "state": s, "uid": 7, "left_uids": [7, 9] if i % 2 else [7],
+                "picked_left": True} for i, s in enumerate(invalid)]
+    kinds = {"all_states": True, "mismatched": 0, "invalid_greedy": records}
+    groups = fg.carry_view(data, "s00", kinds)["groups"]
+    # valid picks: clear unless the pair of heights sits within carry_clear's 5 mm tolerance of the clearance
+    # (4 + 14 cm), which the crafted rule lets through; the cells read are the labels' own
+    from shelf_env.baselines.heuristics import ObservationView
+    from shelf_env.camera.heightmap import observed_height
+    from shelf_env.conditions.safe_picks import carry_clear
+
+    def clear(k):
+        obs = a["obs"][a["label_state"][k]]
+        row, col = divmod(int(a["label_action"][k]) % (20 * 30), 30)
+        return bool(carry_clear(ObservationView.from_observation(obs, 0).blob, observed_height(obs), 0.02)[row, col])
+
+    valid = [k for k in greedy if a["label_valid"][k]]
+    assert groups["valid"] == {"picks": len(valid), "clear": sum(clear(k) for k in valid)}
+    assert groups["valid"]["clear"] >= 0.7 * len(valid)
+    assert groups["bystander"] == {"picks": len(invalid) // 2, "clear": 0}  # another object (uid 9) left too
+    assert groups["picked"] == {"picks": len(invalid) - len(invalid) // 2, "clear": 0}
+    assert groups["moving"] == {"picks": 0, "clear": 0}
+    # with a risk: each group's mean and AUC against the valid picks (here the risk is the picked object's height)
+    class Height:
+        blockers = False
+
+        @staticmethod
+        def risk(x):
+            return x[:, ff.FEATURES.index("object_max_height")]
+
+    risky = fg.carry_view(data, "s00", kinds, risk=type("R", (), {"model": Height, "blockers": False})())
+    assert risky["groups"] == groups
+
+    def height(k):
+        obs = a["obs"][a["label_state"][k]]
+        return float(geometry_features(obs, np.array([a["label_action"][k] % 600]))[0, ff.FEATURES.index(
+            "object_max_height")])
+
+    bystander = [k for i, k in enumerate(k for k in greedy if not a["label_valid"][k]) if i % 2]
+    assert risky["risk"]["valid"] == {"mean": pytest.approx(np.mean([height(k) for k in valid])),
+                                      "auc_against_valid": None}
+    assert risky["risk"]["bystander"]["auc_against_valid"] == pytest.approx(fr.auc(
+        np.r_[np.zeros(len(valid)), np.ones(len(bystander))], np.r_[[height(k) for k in valid],
+                                                                  [height(k) for k in bystander]]))
+    with pytest.raises(ValueError, match="mismatched=3"):
+        fg.carry_view(data, "s00", {**kinds, "mismatched": 3})
+    with pytest.raises(ValueError, match=f"{shard.path.name} state {invalid[0]}: an invalid greedy pick"):
+        fg.carry_view(data, "s00", {**kinds, "invalid_greedy": records[1:]})
+    path = tmp_path / "kinds.json"
+    path.write_text(json.dumps(kinds))
+    assert fg.main(["carry", "--data", str(data), "--series", "s00", "--kinds", str(path),
+                    "--out", str(tmp_path / "carry.json")]) == 0
+    assert json.loads((tmp_path / "carry.json").read_text())["groups"] == groups
+    capsys.readouterr()
+    assert fg.main(["carry", "--data", str(data), "--series", "s00", "--kinds", str(tmp_path / "no.json"),
+                    "--out", str(tmp_path / "c2.json")]) == 2
+    assert "does not exist" in capsys.readouterr().err and not (tmp_path / "c2.json").exists()

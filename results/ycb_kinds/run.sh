@@ -4,7 +4,7 @@
 # each labelled pick and the kinds each invalid greedy pick dropped; the same replay of the old probe (the pilot, whose
 # states mostly do not replay on another machine) and of series 5's validation split (training objects, a contrast).
 # A replay is exact only on the machine that collected the shards: states that differ are counted and left out.
-# Usage: bash results/ycb_kinds/run.sh [probe|kinds|pilot|train|all]
+# Usage: bash results/ycb_kinds/run.sh [probe|kinds|carry|pilot|train|all]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1
@@ -22,6 +22,12 @@ if [[ $step == probe || $step == all ]]; then
 fi
 if [[ $step == kinds || $step == all ]]; then
   python -m research.fall_geometry kinds --data "$out/probe" --series s94,s95 --all-states --out "$out/kinds.json"
+fi
+if [[ $step == carry || $step == all ]]; then
+  # (added after the kinds numbers) whether the camera saw each greedy pick's carry as clear, and the shipped
+  # filter's risk of it, by what the pick did
+  python -m research.fall_geometry carry --data "$out/probe" --series s94,s95 --kinds "$out/kinds.json" \
+      --risk examples/pretrained/p_s.geometry_risk.pt --out "$out/carry.json"
 fi
 if [[ $step == pilot || $step == all ]]; then
   python -m research.fall_geometry kinds --data results/fall_model_refit/ycb_probe --series s90,s91 --all-states \
