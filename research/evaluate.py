@@ -13,6 +13,7 @@ import research.edge_guard  # noqa: F401  (registers +edge-guard)
 import research.fall_risk  # noqa: F401  (registers +fall-filter with shelf_env.policies)
 import research.push_guard  # noqa: F401  (registers +push-guard and +pick-first)
 import research.symmetric_q  # noqa: F401  (registers +symmetric)
+import research.tall_guard  # noqa: F401  (registers +tall-guard)
 import research.tiered_filter  # noqa: F401  (registers +tiered-filter)
 from shelf_env.cli.evaluate import main
 
