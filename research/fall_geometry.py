@@ -341,10 +341,13 @@ def carry_view(data: pathlib.Path, series: str, kinds: dict[str, Any],
     """Whether the camera saw each greedy pick's carry as clear (`shelf_env.conditions.safe_picks.carry_clear` on the
     stored observation's blobs and heights, as `restrict_to_clear_carries` reads them), by what the pick did in the
     `kinds_report` ``kinds`` of every state of ``series`` in ``data``: ``valid``, ``bystander`` (another object
-    left the cabinet), ``picked`` (only the picked object left) or ``moving`` (nothing left, an object kept moving).
+    left the cabinet), ``picked`` (only the picked object left) or ``moving`` (nothing left, an object kept moving);
+    ``tall_blocked`` counts those whose carry is blocked by an object taller than any training object
+    (`research.tall_guard.tall_blocked_cells`).
     With ``risk`` (an exported `GeometryRisk`, such as the shipped filter's) also each group's mean risk and the AUC
     of the risk for each invalid group against the valid picks. A report with states that did not replay is refused:
     its invalid picks' outcomes are unknown."""
+    from research.tall_guard import tall_blocked_cells
     from shelf_env.baselines.heuristics import ObservationView
     from shelf_env.camera.heightmap import observed_height
     from shelf_env.conditions.safe_picks import carry_clear
@@ -357,7 +360,7 @@ def carry_view(data: pathlib.Path, series: str, kinds: dict[str, Any],
     outcome = {(r["shard"], int(r["state"])): ("bystander" if set(r["left_uids"]) - {r["uid"]} else
                                               "picked" if r["picked_left"] else "moving")
                for r in kinds["invalid_greedy"]}
-    groups = {name: {"picks": 0, "clear": 0} for name in ("valid", "bystander", "picked", "moving")}
+    groups = {name: {"picks": 0, "clear": 0, "tall_blocked": 0} for name in ("valid", "bystander", "picked", "moving")}
     risks: dict[str, list[float]] = {}
     greedy_source = dataset.SOURCES.index("greedy")
     prefixes = tuple(f"{name.strip()}_" for name in series.split(","))
@@ -376,6 +379,7 @@ def carry_view(data: pathlib.Path, series: str, kinds: dict[str, Any],
             name = "valid" if a["label_valid"][k] else outcome[key]
             groups[name]["picks"] += 1
             groups[name]["clear"] += int(clear[row, col])
+            groups[name]["tall_blocked"] += int(tall_blocked_cells(obs)[row, col])
             if risk is not None:
                 x = geometry_features(obs, np.array([row * width + col]), risk.blockers)
                 risks.setdefault(name, []).append(float(risk.model.risk(x)[0]))

@@ -10,6 +10,7 @@ import pytest
 
 from research import fall_geometry as fg
 from research import fall_risk as fr
+from research.tall_guard import tall_blocked_cells
 from sb3_pixeldqn import PixelDoubleDQN
 from shelf_env import fall_filter as ff
 from shelf_env.camera.heightmap import CLASS_RGB
@@ -466,11 +467,18 @@ def test_the_carry_view_reads_the_camera_s_clear_carries_by_what_each_greedy_pic
         return bool(carry_clear(ObservationView.from_observation(obs, 0).blob, observed_height(obs), 0.02)[row, col])
 
     valid = [k for k in greedy if a["label_valid"][k]]
-    assert groups["valid"] == {"picks": len(valid), "clear": sum(clear(k) for k in valid)}
+    def tall(ks):
+        return sum(bool(tall_blocked_cells(a["obs"][a["label_state"][k]])[divmod(int(a["label_action"][k]) % 600, 30)])
+                   for k in ks)
+
+    assert groups["valid"] == {"picks": len(valid), "clear": sum(clear(k) for k in valid), "tall_blocked": tall(valid)}
     assert groups["valid"]["clear"] >= 0.7 * len(valid)
-    assert groups["bystander"] == {"picks": len(invalid) // 2, "clear": 0}  # another object (uid 9) left too
-    assert groups["picked"] == {"picks": len(invalid) - len(invalid) // 2, "clear": 0}
-    assert groups["moving"] == {"picks": 0, "clear": 0}
+    # the crafted objects are 4, 10 and 14 cm tall: an invalid pick is blocked by a 14 cm one (over 12 cm) or two
+    # 10 cm ones, and the 14 cm blockers are among them
+    bad = [k for k in greedy if not a["label_valid"][k]]
+    assert groups["bystander"] == {"picks": len(invalid) // 2, "clear": 0, "tall_blocked": tall(bad[1::2])}
+    assert groups["picked"] == {"picks": len(invalid) - len(invalid) // 2, "clear": 0, "tall_blocked": tall(bad[::2])}
+    assert 0 < tall(bad) < len(bad) and groups["moving"] == {"picks": 0, "clear": 0, "tall_blocked": 0}
     # with a risk: each group's mean and AUC against the valid picks (here the risk is the picked object's height)
     class Height:
         blockers = False
