@@ -10,6 +10,15 @@
 # OUT: the experiment's results folder; CANDIDATE: the policy played; NEW, OLD, REF: the cells' labels of the
 # candidate, the shipped policy and the shipped Q-maps alone (the pairs in paired.md); REUSE: the folder the other
 # policies' cells are copied from; SHIPPED and OTHER: those policies.
+# The shipped policy as the validation and held-out cells label it (its Q-maps with its geometry risk, p_s_geo10, under
+# its wrappers), the shipped Q-maps alone, and the other policies issue 10's grid compares with: for a candidate that
+# wraps the shipped policy (`$SHIPPED_GEO+<its wrapper>$SHIPPED_WRAP`).
+SHIPPED_GEO=results/fall_geometry/filter/p_s_geo10.zip
+SHIPPED_WRAP=+geometry-filter+pick-guard+loop-breaker
+SHIPPED_LABEL=p_s_geo10$SHIPPED_WRAP
+SHIPPED_REF=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # results/models_v3
+SHIPPED_OTHERS=("$SHIPPED_REF=examples/pretrained/p_s.zip" examples/pretrained/s.zip h-d h-a)
+
 heldout() {
   local mode=$1 out=$2 candidate=$3 new=$4 old=$5 ref=$6 reuse=$7 shipped=$8
   shift 8

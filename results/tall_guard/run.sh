@@ -9,20 +9,16 @@ cd "$(dirname "$0")/../.."
 . results/heldout.sh
 export OMP_NUM_THREADS=1
 out=results/tall_guard
-geo=results/fall_geometry/filter/p_s_geo10.zip  # the shipped p_s.zip + its geometry risk, the label it was played as
-wrap=+geometry-filter+pick-guard+loop-breaker
-shipped="$geo$wrap"
-old=p_s_geo10$wrap  # the shipped policy's cells' label
-candidate="$geo+tall-guard$wrap"
-new=p_s_geo10+tall-guard$wrap
-ref=p_s_dagger269_aug_mpa_r2_ce1_seed1_avg4  # the shipped Q-maps alone (results/models_v3)
-others=("$ref=examples/pretrained/p_s.zip" examples/pretrained/s.zip h-d h-a)
+shipped="$SHIPPED_GEO$SHIPPED_WRAP"  # the shipped policy and its cells' label: results/heldout.sh
+candidate="$SHIPPED_GEO+tall-guard$SHIPPED_WRAP"
+new=p_s_geo10+tall-guard$SHIPPED_WRAP
 step=${1:-val}
 if [[ $step == val ]]; then
   # validation: seeds 2000-2002, N = 5, 8, 11; the shipped policy's cells from results/push_guard/val90
-  validate $out "$candidate" "$new" $old results/push_guard/val90 "$shipped"
+  validate $out "$candidate" "$new" "$SHIPPED_LABEL" results/push_guard/val90 "$shipped"
 fi
 if [[ $step == open || $step == closed || $step == falls ]]; then
   # held-out: the open-loop grid, closed loop + safe picks, the greedy fall rate at N = 8 (results/heldout.sh)
-  after_validation "$step" $out "$candidate" "$new" $old $ref research.tall_guard "$shipped" "${others[@]}"
+  after_validation "$step" $out "$candidate" "$new" "$SHIPPED_LABEL" $SHIPPED_REF research.tall_guard "$shipped" \
+      "${SHIPPED_OTHERS[@]}"
 fi
