@@ -351,7 +351,7 @@ def carry_view(data: pathlib.Path, series: str, kinds: dict[str, Any],
     from shelf_env.baselines.heuristics import ObservationView
     from shelf_env.camera.heightmap import observed_height
     from shelf_env.conditions.safe_picks import carry_clear
-    from shelf_env.privileged import dataset
+    from shelf_env.privileged.dataset import SOURCES
 
     if kinds.get("mismatched", 0) or not kinds.get("all_states"):
         raise ValueError("carry_view needs a kinds report of every state, each replayed exactly (all_states, "
@@ -362,9 +362,8 @@ def carry_view(data: pathlib.Path, series: str, kinds: dict[str, Any],
                for r in kinds["invalid_greedy"]}
     groups = {name: {"picks": 0, "clear": 0, "tall_blocked": 0} for name in ("valid", "bystander", "picked", "moving")}
     risks: dict[str, list[float]] = {}
-    greedy_source = dataset.SOURCES.index("greedy")
-    prefixes = tuple(f"{name.strip()}_" for name in series.split(","))
-    for shard in (s for s in dataset.load_dataset(data) if s.path.name.startswith(prefixes)):
+    greedy_source = SOURCES.index("greedy")
+    for shard in series_states(data, 0.2, None, None, None, series, all_states=True)[0]:
         a = shard.arrays
         width, cells = a["obs"].shape[-1], int(np.prod(a["obs"].shape[-2:]))
         pick = list(shard.meta["layout"]["map_names"]).index("pick")
@@ -374,12 +373,12 @@ def carry_view(data: pathlib.Path, series: str, kinds: dict[str, Any],
             if not a["label_valid"][k] and key not in outcome:
                 raise ValueError(f"{shard.path.name} state {state}: an invalid greedy pick the kinds report lacks")
             obs = a["obs"][state]
-            clear = carry_clear(ObservationView.from_observation(obs, 0).blob, observed_height(obs),
-                                shard.meta["layout"]["pixel_size"])
+            view = ObservationView.from_observation(obs, 0)
+            clear = carry_clear(view.blob, observed_height(obs), shard.meta["layout"]["pixel_size"])
             name = "valid" if a["label_valid"][k] else outcome[key]
             groups[name]["picks"] += 1
             groups[name]["clear"] += int(clear[row, col])
-            groups[name]["tall_blocked"] += int(tall_blocked_cells(obs)[row, col])
+            groups[name]["tall_blocked"] += int(tall_blocked_cells(obs, view=view)[row, col])
             if risk is not None:
                 x = geometry_features(obs, np.array([row * width + col]), risk.blockers)
                 risks.setdefault(name, []).append(float(risk.model.risk(x)[0]))

@@ -32,14 +32,18 @@ from shelf_env.world.objects import TRAIN_HEIGHT
 TALL_GUARD = "+tall-guard"
 
 
-def tall_blocked_cells(obs: np.ndarray, tallest: float = TRAIN_HEIGHT[1]) -> np.ndarray:
+def tall_blocked_cells(obs: np.ndarray, tallest: float = TRAIN_HEIGHT[1],
+                       view: ObservationView | None = None) -> np.ndarray:
     """Bool ``(H, W)``: the object cells of ``obs`` whose straight carry out of the opening is blocked
     (`carry_clear`'s rule: the cell's height plus the tallest visible object in the corridor reaches the carry
-    height less its tolerance) where that tallest object is taller than ``tallest`` metres."""
+    height less its tolerance) where that tallest object is taller than ``tallest`` metres. ``view``: ``obs`` already
+    read (`ObservationView.from_observation` with ``margin_cells=0``), so that a caller who holds it does not read it
+    twice."""
     obs = np.asarray(obs)
     if obs.ndim != 3 or obs.shape[0] != 4:
         raise ValueError(f"tall_blocked_cells reads one (4, H, W) observation, got shape {obs.shape}")
-    blob, height = ObservationView.from_observation(obs, margin_cells=0).blob, observed_height(obs)
+    view = ObservationView.from_observation(obs, margin_cells=0) if view is None else view
+    blob, height = view.blob, observed_height(obs)
     side_cells = int(round(SIDE_M / (params.CABINET_DEPTH / obs.shape[1])))
     out = np.zeros(blob.shape, bool)
     for b in range(int(blob.max()) + 1):
