@@ -1,5 +1,6 @@
 """``shelf-evaluate`` with the experiments' policy wrappers registered (``<zip>+fall-filter``, ``<zip>+veto``,
-``<zip>+symmetric``, ``<zip>+tiered-filter``, ``<zip>+push-guard``, ``<zip>+pick-first``, ``<zip>+edge-guard``;
+``<zip>+symmetric``, ``<zip>+tiered-filter``, ``<zip>+push-guard``, ``<zip>+pick-first``, ``<zip>+edge-guard``,
+``<zip>+tall-guard``; ``h-d-1cm``, ``h-a-1cm`` and ``+shipped-filter``, `research.wrapped_heuristics`;
 ``<zip>+geometry-filter`` and ``<zip>+pick-guard`` are the product's, `shelf_env.fall_filter` and
 `shelf_env.pick_guard`).
 
@@ -15,6 +16,7 @@ import research.push_guard  # noqa: F401  (registers +push-guard and +pick-first
 import research.symmetric_q  # noqa: F401  (registers +symmetric)
 import research.tall_guard  # noqa: F401  (registers +tall-guard)
 import research.tiered_filter  # noqa: F401  (registers +tiered-filter)
+import research.wrapped_heuristics  # noqa: F401  (registers h-d-1cm, h-a-1cm and +shipped-filter)
 from shelf_env.cli.evaluate import main
 
 if __name__ == "__main__":

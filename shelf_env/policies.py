@@ -58,13 +58,21 @@ class Wrapper:
 
 POLICIES: dict[str, PolicyFactory] = {}
 WRAPPERS: dict[str, Wrapper] = {}
+#: The heightmap cell size (m) of a registered policy that acts at its own (`register_policy`'s ``pixel_size``).
+POLICY_PIXEL_SIZES: dict[str, float] = {}
 
 
-def register_policy(name: str, factory: PolicyFactory) -> None:
-    """Make ``name`` a policy (``factory(env, seed)``); a name is registered once."""
+def register_policy(name: str, factory: PolicyFactory, pixel_size: float | None = None) -> None:
+    """Make ``name`` a policy (``factory(env, seed)``); a name is registered once. ``pixel_size``: the cell
+    size (m) of the env it acts in (`policy_pixel_size`), e.g. to play a heuristic at the cells a learned
+    wrapper reads; None: the env default (`shelf_env.params.PIXEL_SIZE`)."""
     if name in POLICIES:
         raise ValueError(f"policy {name!r} is already registered")
+    if pixel_size is not None and not (isinstance(pixel_size, (int, float)) and 0 < pixel_size < 1):
+        raise ValueError(f"policy {name!r}: pixel_size must be a cell size in metres in (0, 1), got {pixel_size!r}")
     POLICIES[name] = factory
+    if pixel_size is not None:
+        POLICY_PIXEL_SIZES[name] = float(pixel_size)
 
 
 def register_wrapper(suffix: str, wrap: Callable[[Any, gym.Env, str], Any],
@@ -142,12 +150,10 @@ def policy_file(policy: str) -> str:
 
 
 def policy_files(policy: str) -> list[pathlib.Path]:
-    """The files a checkpoint policy reads: the checkpoint (an ensemble's file, then its members), then those of
-    its wrappers (empty for a name)."""
+    """The files a policy reads: a checkpoint's (an ensemble's file, then its members; none for a name), then
+    those of its wrappers (a learned model one reads, also under a name)."""
     name, wrappers = policy_wrappers(policy)
-    if name in POLICIES:
-        return []
-    own = [pathlib.Path(name), *(ensemble_members(name) if is_ensemble(name) else [])]
+    own = [] if name in POLICIES else [pathlib.Path(name), *(ensemble_members(name) if is_ensemble(name) else [])]
     extra = [f for suffix in wrappers if WRAPPERS[suffix].files is not None
              for f in WRAPPERS[suffix].files(name)]  # type: ignore[misc]
     return [*own, *extra]
@@ -258,8 +264,11 @@ def checkpoint_pixel_size(path: str | os.PathLike) -> float:
 
 
 def policy_pixel_size(policy: str) -> float:
-    """Cell size of the env a policy acts in: the checkpoint's, or the env default for named policies."""
-    return params.PIXEL_SIZE if is_named(policy) else checkpoint_pixel_size(policy_file(policy))
+    """Cell size of the env a policy acts in: the checkpoint's; for a name, its registered one (`register_policy`)
+    or the env default."""
+    if is_named(policy):
+        return POLICY_PIXEL_SIZES.get(policy_file(policy), params.PIXEL_SIZE)
+    return checkpoint_pixel_size(policy_file(policy))
 
 
 def check_policy(policy: str, primitives: tuple[str, ...] | None = None) -> tuple[str, ...]:

@@ -406,8 +406,8 @@ def fingerprint_path(out: pathlib.Path, policy: str) -> pathlib.Path:
 
 
 def policy_digest(policy: str) -> str:
-    """The sha256 of the files a checkpoint policy reads (`shelf_env.policies.policy_files`: the
-    checkpoint and its wrappers' own files, their bytes together); "" for a registered name."""
+    """The sha256 of the files a policy reads (`shelf_env.policies.policy_files`: the checkpoint and its
+    wrappers' own files, their bytes together); "" for a registered name whose wrappers read none."""
     files = policy_files(policy)
     return hashlib.sha256(b"".join(f.read_bytes() for f in files)).hexdigest() if files else ""
 
@@ -425,7 +425,7 @@ def check_cell_owner(out: pathlib.Path, policies: list[str], record: bool = Fals
         if seen.setdefault(label, policy) != policy:
             raise ValueError(f"policies {seen[label]} and {policy} share the label {label!r} that names their "
                              "cells: give one another label (LABEL=PATH) or rename its file")
-        if is_named(policy):
+        if not policy_files(policy):  # a name whose wrappers read no file of their own
             continue
         digest = policy_digest(policy)
         path = fingerprint_path(out, policy)

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# The heuristics under the shipped policy's camera-only wrappers (docs/experiments/wrapped-heuristics.md): H-d and H-a
+# at 1 cm cells, bare and under the shipped geometry filter, pick guard and loop breaker (research.wrapped_heuristics),
+# beside the shipped policy, whose cells are copied (by label and digest) from where they were played.
+# Usage: bash results/wrapped_heuristics/run.sh val   |   bash results/wrapped_heuristics/run.sh open d|a
+#   (WORKERS=2 for two processes)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+. results/heldout.sh
+export OMP_NUM_THREADS=1
+out=results/wrapped_heuristics
+shipped="$SHIPPED_GEO$SHIPPED_WRAP"  # the shipped policy and its cells' label: results/heldout.sh
+wrap=+shipped-filter+pick-guard+loop-breaker
+step=${1:-val}
+if [[ $step == val ]]; then
+  # validation: seeds 2000-2002, N = 5, 8, 11, 30 runs; the shipped policy's cells from results/push_guard/val90
+  python -m research.evaluate --policies "$shipped" h-d-1cm h-a-1cm "h-d-1cm$wrap" "h-a-1cm$wrap" --ns 5,8,11 \
+      --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/val90 \
+      --reuse-cells results/push_guard/val90
+  python -m shelf_env.evaluation.compare $out/val90 --pair "$SHIPPED_LABEL" "h-d-1cm$wrap" \
+      --pair "$SHIPPED_LABEL" "h-a-1cm$wrap" --pair "h-d-1cm$wrap" h-d-1cm --pair "h-a-1cm$wrap" h-a-1cm \
+      --out $out/val90_pairs.md
+elif [[ $step == open ]]; then
+  # held-out: issue 10's open-loop grid (seeds 0-2, N = 3..14, 30 runs); the others' cells from results/pick_guard/open
+  which=${2:?"open needs d or a: the wrapped heuristic that sorted more validation scenes"}
+  [[ $which == d || $which == a ]] || { echo "open needs d or a, got '$which'" >&2; exit 2; }
+  wrapped="h-$which-1cm$wrap"
+  grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out $out/open)
+  python -m research.evaluate --policies "$wrapped" "${grid[@]}" --workers "${WORKERS:-1}"
+  python -m research.evaluate --policies "$shipped" "${SHIPPED_OTHERS[@]}" "${grid[@]}" \
+      --reuse-cells results/pick_guard/open
+  python -m research.evaluate --policies "$wrapped" "$shipped" "${SHIPPED_OTHERS[@]}" "${grid[@]}" --summarize-only
+  python -m shelf_env.evaluation.report $out/open --learned "$SHIPPED_LABEL" --pick-only s \
+      --heuristics h-d h-a "$wrapped"
+  python -m shelf_env.evaluation.compare $out/open --pair "$SHIPPED_LABEL" "$wrapped" --pair "$wrapped" h-d \
+      --pair "$wrapped" h-a --out $out/open/paired.md
+else
+  echo "usage: run.sh val | open d|a" >&2
+  exit 2
+fi

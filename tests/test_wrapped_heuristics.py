@@ -1,0 +1,67 @@
+"""research/wrapped_heuristics.py and the registry's cell size per name: ``h-d-1cm`` acts at 1 cm cells,
+``+shipped-filter`` masks the heuristic's picks that the shipped geometry risk calls risky (and only those), and an
+evaluation fingerprints the risk model a named policy's wrapper reads."""
+
+import gymnasium as gym
+import pytest
+
+import research.wrapped_heuristics as wh
+import shelf_env  # noqa: F401  (registers ShelfSort-v0)
+from shelf_env import params, policies
+from shelf_env.evaluation import protocol as ev
+from shelf_env.fall_filter import FallFilter
+
+
+def test_a_name_acts_at_its_registered_cell_size():
+    assert policies.policy_pixel_size("h-d-1cm+shipped-filter+pick-guard+loop-breaker") == wh.CELL_1CM
+    assert policies.policy_pixel_size("h-d+loop-breaker") == params.PIXEL_SIZE
+    env = ev.make_env("h-a-1cm+shipped-filter", 3)
+    try:
+        assert env.observation_space.shape == (4, 40, 60)
+    finally:
+        env.close()
+    for bad in (0.0, -0.01, 1.5, "1cm"):
+        with pytest.raises(ValueError, match="pixel_size"):
+            policies.register_policy(f"bad-{bad}", lambda env, seed: None, pixel_size=bad)
+        assert f"bad-{bad}" not in policies.POLICIES
+
+
+def test_the_shipped_filter_vetoes_exactly_the_risky_choices_of_the_heuristic():
+    env = gym.make("ShelfSort-v0", num_objects=8, object_set="ycb", pixel_size=wh.CELL_1CM)
+    try:
+        plain = policies.make_policy("h-d-1cm", env)
+        wrapped = policies.make_policy("h-d-1cm+shipped-filter", env)
+        assert isinstance(wrapped, FallFilter)
+        cells = env.unwrapped.rows * env.unwrapped.cols
+        changed = 0
+        for seed in (1, 2, 9):  # 1 and 9: H-d's choice is risky; 2: it is not
+            obs, _ = env.reset(seed=seed)
+            risk = wrapped.risk.risk(obs).reshape(-1)
+            a, b = int(plain.predict(obs)[0]), int(wrapped.predict(obs)[0])
+            assert b < cells and risk[b] < wrapped.risk.threshold  # a pick, not a risky one
+            if risk[a] < wrapped.risk.threshold:
+                assert b == a  # nothing to veto: the heuristic's own choice
+            else:
+                changed += 1
+        assert changed == 2 and wrapped.stats["masked"] == 3
+    finally:
+        env.close()
+    small = gym.make("ShelfSort-v0", num_objects=3, object_set="ycb")  # 0.5 cm cells: not what the model reads
+    try:
+        with pytest.raises(ValueError, match="shape"):
+            policies.make_policy("h-d+shipped-filter", small)
+    finally:
+        small.close()
+
+
+def test_an_evaluation_fingerprints_the_model_a_named_policys_wrapper_reads(tmp_path):
+    named = "h-d-1cm+shipped-filter+loop-breaker"
+    assert policies.policy_files(named) == [wh.SHIPPED_RISK]
+    assert policies.policy_files("h-d-1cm+loop-breaker") == [] and ev.policy_digest("h-d+loop-breaker") == ""
+    (tmp_path / "cells").mkdir()
+    ev.check_cell_owner(tmp_path, [named, "h-d"], record=True)
+    assert [p.name for p in (tmp_path / "cells").iterdir()] == ["h-d-1cm+shipped-filter+loop-breaker.sha256"]
+    assert ev.fingerprint_path(tmp_path, named).read_text().strip() == ev.policy_digest(named)
+    ev.fingerprint_path(tmp_path, named).write_text("0" * 64 + "\n")  # cells of another risk model
+    with pytest.raises(ValueError, match="another"):
+        ev.check_cell_owner(tmp_path, [named])
