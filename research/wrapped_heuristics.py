@@ -10,6 +10,8 @@ wrappers, so that the margin can be split into what the wrappers give any policy
   (the bare heuristics act at the env default, 0.5 cm). Played bare they are the control for the cell size.
 - ``+shipped-filter``: `FallFilter` with the shipped risk model, for any policy at 1 cm cells (``+geometry-filter``
   reads the model saved beside a checkpoint, which a heuristic has not). Evaluations fingerprint the model file.
+- ``+risk-trace`` (`RiskTrace`, outermost): changes nothing; counts in the episode's ``policy_stats`` how often the
+  chosen pick is one the shipped risk calls risky, and how often no unsorted object had a cell it calls safe.
 
 Importing the module registers them (`shelf_env.policies`): ``h-d-1cm+shipped-filter+pick-guard+loop-breaker`` is
 H-d under the shipped policy's wrappers, in the shipped order.
@@ -21,8 +23,9 @@ import pathlib
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
-from shelf_env.baselines.heuristics import AccessibilityHeuristic, DistanceHeuristic
+from shelf_env.baselines.heuristics import CUP_MARGIN_M, AccessibilityHeuristic, DistanceHeuristic, ObservationView
 from shelf_env.fall_filter import FallFilter, GeometryRisk
 from shelf_env.policies import POLICIES, register_policy, register_wrapper
 
@@ -32,6 +35,8 @@ SHIPPED_RISK = pathlib.Path("examples/pretrained/p_s.geometry_risk.pt")
 SHIPPED_FILTER = "+shipped-filter"
 #: The cell size (m) the shipped risk model reads: its observations are 40 x 60.
 CELL_1CM = 0.01
+#: The diagnostic wrapper's suffix.
+RISK_TRACE = "+risk-trace"
 
 
 def _check(base: str) -> None:
@@ -57,3 +62,104 @@ for _name, _factory in (("h-d-1cm", _distance), ("h-a-1cm", _accessibility)):
     if _name not in POLICIES:  # the module may be imported twice (a worker, a test)
         register_policy(_name, _factory, pixel_size=CELL_1CM)
 register_wrapper(SHIPPED_FILTER, _wrap, check=_check, files=lambda base: [SHIPPED_RISK])
+
+
+class RiskTrace:
+    """An outermost wrapper that changes nothing: the policy's action, passed through, with counters (``stats``) of
+    what the shipped risk ``risk`` says of it. ``decisions``: calls; ``picks``: the chosen action is a pick;
+    ``risky_picks``: a pick at a cell the risk calls risky (at or over its threshold); ``no_safe``: calls in which no
+    object that looks unsorted has an inner cell (a heuristic's candidate, `ObservationView.graspable`) that the risk
+    calls safe, where a heuristic under the filter keeps its own, risky, candidates."""
+
+    STATS = ("decisions", "picks", "risky_picks", "no_safe")
+
+    def __init__(self, policy: Any, risk: GeometryRisk, map_names: tuple[str, ...], rows: int, cols: int,
+                 margin_cells: int) -> None:
+        self.policy, self.risk = policy, risk
+        self.observation_space, self.action_space = policy.observation_space, policy.action_space
+        self.acts_masked = bool(getattr(policy, "acts_masked", True))
+        self.pick, self.cells, self.cols, self.margin_cells = map_names.index("pick"), rows * cols, cols, margin_cells
+        self.stats = dict.fromkeys(self.STATS, 0)
+
+    def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True, action_masks: np.ndarray | None = None) -> tuple[np.ndarray, Any]:
+        action, state = self.policy.predict(observation, state=state, episode_start=episode_start,
+                                            deterministic=deterministic, action_masks=action_masks)
+        obs = np.asarray(observation)
+        risky = self.risk.risk(obs) >= self.risk.threshold
+        view = ObservationView.from_observation(obs, self.margin_cells)
+        m, cell = divmod(int(np.asarray(action).reshape(-1)[0]), self.cells)
+        self.stats["decisions"] += 1
+        self.stats["no_safe"] += int(not (view.graspable & ~view.sorted_cells & ~risky).any())
+        if m == self.pick:
+            self.stats["picks"] += 1
+            self.stats["risky_picks"] += int(risky.reshape(-1)[cell])
+        return action, state
+
+
+def _trace(agent: Any, env: gym.Env, base: str) -> RiskTrace:
+    unwrapped: Any = env.unwrapped
+    return RiskTrace(agent, GeometryRisk.load(SHIPPED_RISK), tuple(unwrapped.map_names), unwrapped.rows,
+                     unwrapped.cols, int(round(CUP_MARGIN_M / unwrapped.camera.pixel_size)))
+
+
+register_wrapper(RISK_TRACE, _trace, check=_check, files=lambda base: [SHIPPED_RISK])
+
+
+def trace_table(trace: pathlib.Path, played: pathlib.Path) -> str:
+    """Markdown: per ``+risk-trace`` policy in the evaluation folder ``trace``, its episodes and the trace's counters,
+    after checking that every traced episode ended exactly as the same policy's episode in ``played`` (the wrapper
+    changes no action). `ValueError` naming the first episode that differs or is missing."""
+    from shelf_env.evaluation.protocol import load_cells
+
+    def key(r: Any) -> tuple:
+        return r.num_objects, r.seed, r.run
+
+    before = {(r.policy, *key(r)): r for r in load_cells(played)}
+    rows = ["| policy | episodes | sorted | fell | decisions | picks | risky picks (of picks) | no safe candidate "
+            "(of decisions) | fell episodes with a risky pick |", "|---|---|---|---|---|---|---|---|---|"]
+    by_policy: dict[str, list[Any]] = {}
+    for r in load_cells(trace):
+        if r.policy.endswith(RISK_TRACE):
+            by_policy.setdefault(r.policy, []).append(r)
+    if not by_policy:
+        raise ValueError(f"{trace} has no cells of a {RISK_TRACE} policy")
+    for policy, records in sorted(by_policy.items()):
+        plain = policy[:-len(RISK_TRACE)]
+        for r in records:
+            old = before.get((plain, *key(r)))
+            where = f"{policy} N={r.num_objects} seed {r.seed} run {r.run}"
+            if old is None:
+                raise ValueError(f"{where}: no such episode of {plain} in {played}")
+            if (old.success, old.actions, old.failure) != (r.success, r.actions, r.failure):
+                raise ValueError(f"{where} ended {r.success, r.actions, r.failure}, {plain} in {played} "
+                                 f"{old.success, old.actions, old.failure}")
+        total = {k: sum(r.policy_stats.get(k, 0) for r in records) for k in RiskTrace.STATS}
+        fell = [r for r in records if r.fell]
+        rows.append(f"| {plain} | {len(records)} | {sum(r.success for r in records)} | {len(fell)} | "
+                    f"{total['decisions']} | {total['picks']} | {total['risky_picks']} "
+                    f"({100 * total['risky_picks'] / max(total['picks'], 1):.1f} %) | {total['no_safe']} "
+                    f"({100 * total['no_safe'] / max(total['decisions'], 1):.1f} %) | "
+                    f"{sum(r.policy_stats.get('risky_picks', 0) > 0 for r in fell)} of {len(fell)} |")
+    return "\n".join(rows) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m research.wrapped_heuristics TRACE PLAYED``: `trace_table` on stdout."""
+    import argparse
+    import sys
+
+    parser = argparse.ArgumentParser(description=trace_table.__doc__)
+    parser.add_argument("trace", type=pathlib.Path, help="an evaluation folder with +risk-trace policies' cells")
+    parser.add_argument("played", type=pathlib.Path, help="the folder with the same policies' cells, untraced")
+    args = parser.parse_args(argv)
+    try:
+        sys.stdout.write(trace_table(args.trace, args.played))
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -2,7 +2,11 @@
 ``+shipped-filter`` masks the heuristic's picks that the shipped geometry risk calls risky (and only those), and an
 evaluation fingerprints the risk model a named policy's wrapper reads."""
 
+import dataclasses
+import json
+
 import gymnasium as gym
+import numpy as np
 import pytest
 
 import research.wrapped_heuristics as wh
@@ -65,3 +69,42 @@ def test_an_evaluation_fingerprints_the_model_a_named_policys_wrapper_reads(tmp_
     ev.fingerprint_path(tmp_path, named).write_text("0" * 64 + "\n")  # cells of another risk model
     with pytest.raises(ValueError, match="another"):
         ev.check_cell_owner(tmp_path, [named])
+
+
+def test_the_risk_trace_changes_no_action_and_counts_the_risky_picks():
+    env = gym.make("ShelfSort-v0", num_objects=8, object_set="ycb", pixel_size=wh.CELL_1CM)
+    try:
+        obs, _ = env.reset(seed=9)  # H-d's choice here is risky (the filter test above)
+        plain = int(policies.make_policy("h-d-1cm", env).predict(obs)[0])
+        traced = policies.make_policy("h-d-1cm+risk-trace", env)
+        assert isinstance(traced, wh.RiskTrace) and not traced.acts_masked  # a heuristic gets no env masks
+        assert int(traced.predict(obs, episode_start=np.array([True]))[0]) == plain
+        assert traced.stats == {"decisions": 1, "picks": 1, "risky_picks": 1, "no_safe": 0}
+        filtered = policies.make_policy("h-d-1cm+shipped-filter+risk-trace", env)
+        filtered.predict(obs)
+        assert filtered.stats == {"decisions": 1, "picks": 1, "risky_picks": 0, "no_safe": 0}
+    finally:
+        env.close()
+
+
+def _cell(folder, policy, outcomes):
+    """One cell (N = 8, seed 0) of ``policy`` with (success, actions, failure, fell, risky_picks) per run."""
+    records = [ev.EpisodeRecord(policy, "ycb", 8, 0, run, success=s, actions=a, num_unsorted_initial=8, fell=f,
+                                noops=0, failure=why, max_repeat=1, policy_stats={"decisions": a, "picks": a,
+                                                                                 "risky_picks": k, "no_safe": 0})
+               for run, (s, a, why, f, k) in enumerate(outcomes)]
+    (folder / "cells").mkdir(parents=True, exist_ok=True)
+    (folder / "cells" / f"{policy}__ycb__N08__seed0__runs{len(records)}.json").write_text(
+        json.dumps([dataclasses.asdict(r) for r in records]))
+
+
+def test_the_trace_table_checks_the_episodes_against_the_untraced_ones(tmp_path):
+    runs = [(True, 9, "", False, 0), (False, 4, "fell", True, 2), (False, 6, "fell", True, 0)]
+    _cell(tmp_path / "trace", "h-a-1cm+risk-trace", runs)
+    _cell(tmp_path / "played", "h-a-1cm", runs)
+    table = wh.trace_table(tmp_path / "trace", tmp_path / "played")
+    assert "| h-a-1cm | 3 | 1 | 2 | 19 | 19 | 2 (10.5 %) | 0 (0.0 %) | 1 of 2 |" in table
+    _cell(tmp_path / "played", "h-a-1cm", [runs[0], (False, 5, "fell", True, 2), runs[2]])
+    with pytest.raises(ValueError, match="run 1 ended"):
+        wh.trace_table(tmp_path / "trace", tmp_path / "played")
+    assert wh.main([str(tmp_path / "trace"), str(tmp_path / "nowhere")]) == 2

@@ -2,7 +2,8 @@
 # The heuristics under the shipped policy's camera-only wrappers (docs/experiments/wrapped-heuristics.md): H-d and H-a
 # at 1 cm cells, bare and under the shipped geometry filter, pick guard and loop breaker (research.wrapped_heuristics),
 # beside the shipped policy, whose cells are copied (by label and digest) from where they were played.
-# Usage: bash results/wrapped_heuristics/run.sh val   |   bash results/wrapped_heuristics/run.sh open d|a
+# Usage: bash results/wrapped_heuristics/run.sh val   |   bash results/wrapped_heuristics/run.sh open d|a   |
+#   bash results/wrapped_heuristics/run.sh trace   (the risk of the chosen picks, validation scenes at N = 8)
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -34,7 +35,13 @@ elif [[ $step == open ]]; then
       --heuristics h-d h-a "$wrapped"
   python -m shelf_env.evaluation.compare $out/open --pair "$SHIPPED_LABEL" "$wrapped" --pair "$wrapped" h-d \
       --pair "$wrapped" h-a --out $out/open/paired.md
+elif [[ $step == trace ]]; then
+  # a diagnostic that changes no action (+risk-trace, outermost): how often the chosen pick is one the shipped risk
+  # calls risky, on the validation scenes at N = 8 (outcomes checked against val90)
+  python -m research.evaluate --policies "$shipped+risk-trace" "h-a-1cm$wrap+risk-trace" h-a-1cm+risk-trace --ns 8 \
+      --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/trace_n8
+  python -m research.wrapped_heuristics $out/trace_n8 $out/val90 > $out/trace_n8.md
 else
-  echo "usage: run.sh val | open d|a" >&2
+  echo "usage: run.sh val | open d|a | trace" >&2
   exit 2
 fi
