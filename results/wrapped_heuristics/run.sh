@@ -3,7 +3,8 @@
 # at 1 cm cells, bare and under the shipped geometry filter, pick guard and loop breaker (research.wrapped_heuristics),
 # beside the shipped policy, whose cells are copied (by label and digest) from where they were played.
 # Usage: bash results/wrapped_heuristics/run.sh val   |   bash results/wrapped_heuristics/run.sh open d|a   |
-#   bash results/wrapped_heuristics/run.sh trace   (the risk of the chosen picks, validation scenes at N = 8)
+#   bash results/wrapped_heuristics/run.sh trace   (the risk of the chosen picks, validation scenes at N = 8)   |
+#   bash results/wrapped_heuristics/run.sh here d|a   (the shipped policy played again on this machine, its own label)
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -35,6 +36,16 @@ elif [[ $step == open ]]; then
       --heuristics h-d h-a "$wrapped"
   python -m shelf_env.evaluation.compare $out/open --pair "$SHIPPED_LABEL" "$wrapped" --pair "$wrapped" h-d \
       --pair "$wrapped" h-a --out $out/open/paired.md
+elif [[ $step == here ]]; then
+  # the shipped policy's held-out cells were played on another machine (PyBullet's floating point differs between
+  # CPUs): play them again here under the label p_s_geo10_here..., paired with the wrapped heuristic played here
+  which=${2:?"here needs d or a: the wrapped heuristic of run.sh open"}
+  [[ $which == d || $which == a ]] || { echo "here needs d or a, got '$which'" >&2; exit 2; }
+  here="p_s_geo10_here=$SHIPPED_GEO$SHIPPED_WRAP"
+  grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out $out/open)
+  python -m research.evaluate --policies "$here" "${grid[@]}" --workers "${WORKERS:-1}"
+  python -m shelf_env.evaluation.compare $out/open --pair "p_s_geo10_here$SHIPPED_WRAP" "h-$which-1cm$wrap" \
+      --pair "p_s_geo10_here$SHIPPED_WRAP" "$SHIPPED_LABEL" --out $out/open/paired_here.md
 elif [[ $step == trace ]]; then
   # a diagnostic that changes no action (+risk-trace, outermost): how often the chosen pick is one the shipped risk
   # calls risky, on the validation scenes at N = 8 (outcomes checked against val90)
@@ -42,6 +53,6 @@ elif [[ $step == trace ]]; then
       --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/trace_n8
   python -m research.wrapped_heuristics $out/trace_n8 $out/val90 > $out/trace_n8.md
 else
-  echo "usage: run.sh val | open d|a | trace" >&2
+  echo "usage: run.sh val | open d|a | here d|a | trace" >&2
   exit 2
 fi
