@@ -87,11 +87,11 @@ def test_the_risk_trace_changes_no_action_and_counts_the_risky_picks():
         env.close()
 
 
-def _cell(folder, policy, outcomes):
+def _cell(folder, policy, outcomes, machine="here"):
     """One cell (N = 8, seed 0) of ``policy`` with (success, actions, failure, fell, risky_picks) per run."""
     records = [ev.EpisodeRecord(policy, "ycb", 8, 0, run, success=s, actions=a, num_unsorted_initial=8, fell=f,
-                                noops=0, failure=why, max_repeat=1, policy_stats={"decisions": a, "picks": a,
-                                                                                 "risky_picks": k, "no_safe": 0})
+                                noops=0, failure=why, max_repeat=1, machine=machine,
+                                policy_stats={"decisions": a, "picks": a, "risky_picks": k, "no_safe": 0})
                for run, (s, a, why, f, k) in enumerate(outcomes)]
     (folder / "cells").mkdir(parents=True, exist_ok=True)
     (folder / "cells" / f"{policy}__ycb__N08__seed0__runs{len(records)}.json").write_text(
@@ -103,8 +103,10 @@ def test_the_trace_table_checks_the_episodes_against_the_untraced_ones(tmp_path)
     _cell(tmp_path / "trace", "h-a-1cm+risk-trace", runs)
     _cell(tmp_path / "played", "h-a-1cm", runs)
     table = wh.trace_table(tmp_path / "trace", tmp_path / "played")
-    assert "| h-a-1cm | 3 | 1 | 2 | 19 | 19 | 2 (10.5 %) | 0 (0.0 %) | 1 of 2 |" in table
+    assert "| h-a-1cm | 3 | 1 | 2 | 19 | 19 | 2 (10.5 %) | 0 (0.0 %) | 1 of 2 | 3 (0) |" in table
     _cell(tmp_path / "played", "h-a-1cm", [runs[0], (False, 5, "fell", True, 2), runs[2]])
     with pytest.raises(ValueError, match="run 1 ended"):
         wh.trace_table(tmp_path / "trace", tmp_path / "played")
+    _cell(tmp_path / "played", "h-a-1cm", [runs[0], (False, 5, "fell", True, 2), runs[2]], machine="elsewhere")
+    assert "| 1 of 2 | 0 (3) |" in wh.trace_table(tmp_path / "trace", tmp_path / "played")  # counted, not compared
     assert wh.main([str(tmp_path / "trace"), str(tmp_path / "nowhere")]) == 2
