@@ -152,19 +152,24 @@ def trace_table(trace: pathlib.Path, played: pathlib.Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m research.wrapped_heuristics TRACE PLAYED``: `trace_table` on stdout."""
+    """``python -m research.wrapped_heuristics TRACE PLAYED --out FILE``: `trace_table`, written atomically (stdout
+    is not the place: PyBullet prints its build time there)."""
     import argparse
     import sys
+
+    from shelf_env.files import write_text_atomically
 
     parser = argparse.ArgumentParser(description=trace_table.__doc__)
     parser.add_argument("trace", type=pathlib.Path, help="an evaluation folder with +risk-trace policies' cells")
     parser.add_argument("played", type=pathlib.Path, help="the folder with the same policies' cells, untraced")
+    parser.add_argument("--out", type=pathlib.Path, required=True, help="the Markdown table's file")
     args = parser.parse_args(argv)
     try:
-        sys.stdout.write(trace_table(args.trace, args.played))
+        table = trace_table(args.trace, args.played)
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    write_text_atomically(args.out, table)
     return 0
 
 

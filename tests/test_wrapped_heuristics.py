@@ -109,4 +109,7 @@ def test_the_trace_table_checks_the_episodes_against_the_untraced_ones(tmp_path)
         wh.trace_table(tmp_path / "trace", tmp_path / "played")
     _cell(tmp_path / "played", "h-a-1cm", [runs[0], (False, 5, "fell", True, 2), runs[2]], machine="elsewhere")
     assert "| 1 of 2 | 0 (3) |" in wh.trace_table(tmp_path / "trace", tmp_path / "played")  # counted, not compared
-    assert wh.main([str(tmp_path / "trace"), str(tmp_path / "nowhere")]) == 2
+    assert wh.main([str(tmp_path / "trace"), str(tmp_path / "nowhere"), "--out", str(tmp_path / "t.md")]) == 2
+    assert not (tmp_path / "t.md").exists()  # nothing written on an error
+    assert wh.main([str(tmp_path / "trace"), str(tmp_path / "played"), "--out", str(tmp_path / "t.md")]) == 0
+    assert (tmp_path / "t.md").read_text() == wh.trace_table(tmp_path / "trace", tmp_path / "played")

@@ -51,7 +51,7 @@ elif [[ $step == trace ]]; then
   # calls risky, on the validation scenes at N = 8 (outcomes checked against val90)
   python -m research.evaluate --policies "$shipped+risk-trace" "h-a-1cm$wrap+risk-trace" h-a-1cm+risk-trace --ns 8 \
       --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/trace_n8
-  python -m research.wrapped_heuristics $out/trace_n8 $out/val90 > $out/trace_n8.md
+  python -m research.wrapped_heuristics $out/trace_n8 $out/val90 --out $out/trace_n8.md
 else
   echo "usage: run.sh val | open d|a | here d|a | trace" >&2
   exit 2
