@@ -10,6 +10,10 @@ wrappers, so that the margin can be split into what the wrappers give any policy
   (the bare heuristics act at the env default, 0.5 cm). Played bare they are the control for the cell size.
 - ``+shipped-filter``: `FallFilter` with the shipped risk model, for any policy at 1 cm cells (``+geometry-filter``
   reads the model saved beside a checkpoint, which a heuristic has not). Evaluations fingerprint the model file.
+- ``h-a-1cm-push`` (`AccessibilityPushFallback`): H-a at 1 cm cells that pushes where it is masked out of every
+  candidate pick of every unsorted object (under the filter: where every one is risky), with the privileged
+  lookahead's push candidates (`LookaheadHeuristic.push_candidates`, which read only the observation) but nothing
+  probed. A test of the reading that the Q-maps' share is what they do when every pick looks risky.
 - ``+risk-trace`` (`RiskTrace`, outermost): changes nothing; counts in the episode's ``policy_stats`` how often the
   chosen pick is one the shipped risk calls risky, and how often no unsorted object had a cell it calls safe.
 
@@ -28,6 +32,7 @@ import numpy as np
 from shelf_env.baselines.heuristics import CUP_MARGIN_M, AccessibilityHeuristic, DistanceHeuristic, ObservationView
 from shelf_env.fall_filter import FallFilter, GeometryRisk
 from shelf_env.policies import POLICIES, register_policy, register_wrapper
+from shelf_env.privileged.lookahead import LookaheadHeuristic
 
 #: The shipped P+S's geometry risk model (relative to the repository root, where evaluations run).
 SHIPPED_RISK = pathlib.Path("examples/pretrained/p_s.geometry_risk.pt")
@@ -50,6 +55,30 @@ def _wrap(agent: Any, env: gym.Env, base: str) -> FallFilter:
     return FallFilter(agent, GeometryRisk.load(SHIPPED_RISK), unwrapped.map_names, unwrapped.rows, unwrapped.cols)
 
 
+class AccessibilityPushFallback(AccessibilityHeuristic):
+    """H-a, except where masks (a filter's) leave no inner cell of any object that looks unsorted: then the first
+    allowed push of `LookaheadHeuristic.push_candidates` (beside each object at its middle row, towards its region
+    first; unsorted objects first, front first), unprobed. Without masks, or with no allowed push, it is H-a."""
+
+    push_candidates = LookaheadHeuristic.push_candidates  # camera-only: it reads the view, the codec and the layout
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.stats = {"push_fallbacks": 0}
+
+    def _act(self, obs: np.ndarray, allowed: np.ndarray | None = None) -> int:
+        if allowed is not None:
+            view = ObservationView.from_observation(obs, self.margin_cells)
+            picks = allowed.reshape(-1, self.rows, self.cols)[self.codec.map_index("pick")]
+            unsorted = view.graspable & ~view.sorted_cells
+            if unsorted.any() and not (unsorted & picks).any():
+                for action in self.push_candidates(view):  # type: ignore[misc]
+                    if allowed[action]:
+                        self.stats["push_fallbacks"] += 1
+                        return action
+        return super()._act(obs, allowed)
+
+
 def _distance(env: gym.Env, seed: int) -> DistanceHeuristic:
     return DistanceHeuristic(env)
 
@@ -58,7 +87,11 @@ def _accessibility(env: gym.Env, seed: int) -> AccessibilityHeuristic:
     return AccessibilityHeuristic(env)
 
 
-for _name, _factory in (("h-d-1cm", _distance), ("h-a-1cm", _accessibility)):
+def _push_fallback(env: gym.Env, seed: int) -> AccessibilityPushFallback:
+    return AccessibilityPushFallback(env)
+
+
+for _name, _factory in (("h-d-1cm", _distance), ("h-a-1cm", _accessibility), ("h-a-1cm-push", _push_fallback)):
     if _name not in POLICIES:  # the module may be imported twice (a worker, a test)
         register_policy(_name, _factory, pixel_size=CELL_1CM)
 register_wrapper(SHIPPED_FILTER, _wrap, check=_check, files=lambda base: [SHIPPED_RISK])

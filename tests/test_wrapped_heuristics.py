@@ -12,6 +12,7 @@ import pytest
 import research.wrapped_heuristics as wh
 import shelf_env  # noqa: F401  (registers ShelfSort-v0)
 from shelf_env import params, policies
+from shelf_env.baselines.heuristics import ObservationView
 from shelf_env.evaluation import protocol as ev
 from shelf_env.fall_filter import FallFilter
 
@@ -113,3 +114,27 @@ def test_the_trace_table_checks_the_episodes_against_the_untraced_ones(tmp_path)
     assert not (tmp_path / "t.md").exists()  # nothing written on an error
     assert wh.main([str(tmp_path / "trace"), str(tmp_path / "played"), "--out", str(tmp_path / "t.md")]) == 0
     assert (tmp_path / "t.md").read_text() == wh.trace_table(tmp_path / "trace", tmp_path / "played")
+
+
+def test_the_push_fallback_pushes_only_where_every_unsorted_objects_candidates_are_masked():
+    env = gym.make("ShelfSort-v0", num_objects=5, object_set="ycb", pixel_size=wh.CELL_1CM)
+    try:
+        obs, _ = env.reset(seed=3)
+        base = env.unwrapped
+        pusher, plain = wh.AccessibilityPushFallback(env), policies.make_policy("h-a-1cm", env)
+        n = int(env.action_space.n)
+        everything = np.ones(n, bool)
+        assert int(pusher.predict(obs, action_masks=everything)[0]) == int(plain.predict(obs)[0])  # a pick: H-a's
+        view = ObservationView.from_observation(obs, pusher.margin_cells)
+        unsorted = view.graspable & ~view.sorted_cells
+        assert unsorted.any()
+        masked = everything.copy()
+        masked[base.codec.map_index("pick") * base.rows * base.cols + np.flatnonzero(unsorted)] = False
+        first, second = pusher.push_candidates(view)[:2]
+        assert int(pusher.predict(obs, action_masks=masked)[0]) == first >= base.rows * base.cols  # a push
+        masked[first] = False
+        assert int(pusher.predict(obs, action_masks=masked)[0]) == second
+        assert pusher.stats == {"push_fallbacks": 2}
+        assert int(pusher.predict(obs)[0]) == int(plain.predict(obs)[0])  # no masks: H-a
+    finally:
+        env.close()

@@ -4,7 +4,8 @@
 # beside the shipped policy, whose cells are copied (by label and digest) from where they were played.
 # Usage: bash results/wrapped_heuristics/run.sh val   |   bash results/wrapped_heuristics/run.sh open d|a   |
 #   bash results/wrapped_heuristics/run.sh trace   (the risk of the chosen picks, validation scenes at N = 8)   |
-#   bash results/wrapped_heuristics/run.sh here d|a   (the shipped policy played again on this machine, its own label)
+#   bash results/wrapped_heuristics/run.sh here d|a   (the shipped policy played again on this machine, its own label)   |
+#   bash results/wrapped_heuristics/run.sh push   (H-a with a push fallback under the wrappers: validation scenes)
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -24,9 +25,12 @@ if [[ $step == val ]]; then
       --out $out/val90_pairs.md
 elif [[ $step == open ]]; then
   # held-out: issue 10's open-loop grid (seeds 0-2, N = 3..14, 30 runs); the others' cells from results/pick_guard/open
-  which=${2:?"open needs d or a: the wrapped heuristic that sorted more validation scenes"}
-  [[ $which == d || $which == a ]] || { echo "open needs d or a, got '$which'" >&2; exit 2; }
-  wrapped="h-$which-1cm$wrap"
+  which=${2:?"open needs d, a or push: the wrapped heuristic that sorted more validation scenes, or H-a with pushes"}
+  case $which in
+    d|a) wrapped="h-$which-1cm$wrap" ;;
+    push) wrapped="h-a-1cm-push$wrap" ;;
+    *) echo "open needs d, a or push, got '$which'" >&2; exit 2 ;;
+  esac
   grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out $out/open)
   python -m research.evaluate --policies "$wrapped" "${grid[@]}" --workers "${WORKERS:-1}"
   python -m research.evaluate --policies "$shipped" "${SHIPPED_OTHERS[@]}" "${grid[@]}" \
@@ -36,6 +40,14 @@ elif [[ $step == open ]]; then
       --heuristics h-d h-a "$wrapped"
   python -m shelf_env.evaluation.compare $out/open --pair "$SHIPPED_LABEL" "$wrapped" --pair "$wrapped" h-d \
       --pair "$wrapped" h-a --out $out/open/paired.md
+elif [[ $step == push ]]; then
+  # H-a with a camera-only push fallback under the wrappers (research.wrapped_heuristics.AccessibilityPushFallback) on
+  # the validation scenes, beside the shipped policy played on this machine (p_s_geo10_here)
+  python -m research.evaluate --policies "p_s_geo10_here=$SHIPPED_GEO$SHIPPED_WRAP" "h-a-1cm-push$wrap" --ns 5,8,11 \
+      --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/val90
+  python -m shelf_env.evaluation.compare $out/val90 --pair "h-a-1cm-push$wrap" "h-a-1cm$wrap" \
+      --pair "p_s_geo10_here$SHIPPED_WRAP" "h-a-1cm-push$wrap" --pair "p_s_geo10_here$SHIPPED_WRAP" "$SHIPPED_LABEL" \
+      --out $out/val90_pairs_push.md
 elif [[ $step == here ]]; then
   # the shipped policy's held-out cells were played on another machine (PyBullet's floating point differs between
   # CPUs): play them again here under the label p_s_geo10_here..., paired with the wrapped heuristic played here
@@ -53,6 +65,6 @@ elif [[ $step == trace ]]; then
       --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/trace_n8
   python -m research.wrapped_heuristics $out/trace_n8 $out/val90 --out $out/trace_n8.md
 else
-  echo "usage: run.sh val | open d|a | here d|a | trace" >&2
+  echo "usage: run.sh val | open d|a|push | here d|a | push | trace" >&2
   exit 2
 fi
