@@ -36,10 +36,14 @@ elif [[ $step == open ]]; then
   python -m research.evaluate --policies "$shipped" "${SHIPPED_OTHERS[@]}" "${grid[@]}" \
       --reuse-cells results/pick_guard/open
   python -m research.evaluate --policies "$wrapped" "$shipped" "${SHIPPED_OTHERS[@]}" "${grid[@]}" --summarize-only
+  # report_<which>.md, paired_<which>.md: the shipped policy against H-d, H-a and this one; the pairs (with the
+  # shipped policy played on this machine too, where run.sh here has played it)
+  here=()
+  [[ -f $out/open/cells/p_s_geo10_here$SHIPPED_WRAP.sha256 ]] && here=(--pair "p_s_geo10_here$SHIPPED_WRAP" "$wrapped")
   python -m shelf_env.evaluation.report $out/open --learned "$SHIPPED_LABEL" --pick-only s \
-      --heuristics h-d h-a "$wrapped"
-  python -m shelf_env.evaluation.compare $out/open --pair "$SHIPPED_LABEL" "$wrapped" --pair "$wrapped" h-d \
-      --pair "$wrapped" h-a --out $out/open/paired.md
+      --heuristics h-d h-a "$wrapped" --out $out/open/report_$which.md
+  python -m shelf_env.evaluation.compare $out/open --pair "$SHIPPED_LABEL" "$wrapped" "${here[@]}" \
+      --pair "$wrapped" h-d --pair "$wrapped" h-a --out $out/open/paired_$which.md
 elif [[ $step == push ]]; then
   # H-a with a camera-only push fallback under the wrappers (research.wrapped_heuristics.AccessibilityPushFallback) on
   # the validation scenes, beside the shipped policy played on this machine (p_s_geo10_here)
