@@ -138,3 +138,14 @@ def test_the_push_fallback_pushes_only_where_every_unsorted_objects_candidates_a
         assert int(pusher.predict(obs)[0]) == int(plain.predict(obs)[0])  # no masks: H-a
     finally:
         env.close()
+
+
+def test_ray_refuses_a_named_policy_whose_wrapper_reads_a_file(tmp_path, capsys):
+    pytest.importorskip("ray")
+    from shelf_env.cli import evaluate
+
+    args = ["--policies", "h-d-1cm+shipped-filter", "--ns", "3", "--runs", "1", "--seeds", "1",
+            "--out", str(tmp_path / "out"), "--backend", "ray"]
+    assert evaluate.main(args) == 2
+    assert "carries only the checkpoint" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
