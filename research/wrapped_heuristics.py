@@ -14,6 +14,7 @@ wrappers, so that the margin can be split into what the wrappers give any policy
   candidate pick of every unsorted object (under the filter: where every one is risky), with the privileged
   lookahead's push candidates (`LookaheadHeuristic.push_candidates`, which read only the observation) but nothing
   probed. A test of the reading that the Q-maps' share is what they do when every pick looks risky.
+- ``+push-fallback`` (`PushFallback`): the same rule around a checkpoint, innermost (under the filter and the guard).
 - ``+risk-trace`` (`RiskTrace`, outermost): changes nothing; counts in the episode's ``policy_stats`` how often the
   chosen pick is one the shipped risk calls risky, and how often no unsorted object had a cell it calls safe.
 
@@ -66,17 +67,46 @@ class AccessibilityPushFallback(AccessibilityHeuristic):
         super().__init__(env)
         self.stats = {"push_fallbacks": 0}
 
+    def fallback(self, obs: np.ndarray, allowed: np.ndarray) -> int | None:
+        """The push for ``obs`` where ``allowed`` (flat) leaves no inner cell of any object that looks unsorted: the
+        first allowed one of `push_candidates`; None where a candidate pick is left, or no candidate push is allowed."""
+        view = ObservationView.from_observation(obs, self.margin_cells)
+        picks = allowed.reshape(-1, self.rows, self.cols)[self.codec.map_index("pick")]
+        unsorted = view.graspable & ~view.sorted_cells
+        if unsorted.any() and not (unsorted & picks).any():
+            for action in self.push_candidates(view):  # type: ignore[misc]
+                if allowed[action]:
+                    return int(action)
+        return None
+
     def _act(self, obs: np.ndarray, allowed: np.ndarray | None = None) -> int:
-        if allowed is not None:
-            view = ObservationView.from_observation(obs, self.margin_cells)
-            picks = allowed.reshape(-1, self.rows, self.cols)[self.codec.map_index("pick")]
-            unsorted = view.graspable & ~view.sorted_cells
-            if unsorted.any() and not (unsorted & picks).any():
-                for action in self.push_candidates(view):  # type: ignore[misc]
-                    if allowed[action]:
-                        self.stats["push_fallbacks"] += 1
-                        return action
+        push = None if allowed is None else self.fallback(obs, allowed)
+        if push is not None:
+            self.stats["push_fallbacks"] += 1
+            return push
         return super()._act(obs, allowed)
+
+
+class PushFallback:
+    """``+push-fallback``, innermost around a checkpoint: where the masks it is given (the filter's and the guard's,
+    which wrap it) leave no inner cell of any object that looks unsorted, the push `AccessibilityPushFallback` would
+    take, instead of the policy's choice; the policy's choice elsewhere. Counts ``push_fallbacks``."""
+
+    def __init__(self, policy: Any, env: gym.Env) -> None:
+        self.policy, self.rule = policy, AccessibilityPushFallback(env)
+        self.observation_space, self.action_space = policy.observation_space, policy.action_space
+        self.acts_masked = bool(getattr(policy, "acts_masked", True))
+        self.stats = {"push_fallbacks": 0}
+
+    def predict(self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True, action_masks: np.ndarray | None = None) -> tuple[np.ndarray, Any]:
+        if action_masks is not None:
+            push = self.rule.fallback(np.asarray(observation), np.asarray(action_masks, bool).reshape(-1))
+            if push is not None:
+                self.stats["push_fallbacks"] += 1
+                return np.array(push), state
+        return self.policy.predict(observation, state=state, episode_start=episode_start,
+                                   deterministic=deterministic, action_masks=action_masks)
 
 
 def _distance(env: gym.Env, seed: int) -> DistanceHeuristic:
@@ -95,6 +125,9 @@ for _name, _factory in (("h-d-1cm", _distance), ("h-a-1cm", _accessibility), ("h
     if _name not in POLICIES:  # the module may be imported twice (a worker, a test)
         register_policy(_name, _factory, pixel_size=CELL_1CM)
 register_wrapper(SHIPPED_FILTER, _wrap, check=_check, files=lambda base: [SHIPPED_RISK])
+#: The push fallback for a checkpoint's suffix (innermost: it acts on the masks the filter and the guard pass down).
+PUSH_FALLBACK = "+push-fallback"
+register_wrapper(PUSH_FALLBACK, lambda agent, env, base: PushFallback(agent, env))
 
 
 class RiskTrace:

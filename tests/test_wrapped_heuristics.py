@@ -149,3 +149,29 @@ def test_ray_refuses_a_named_policy_whose_wrapper_reads_a_file(tmp_path, capsys)
     assert evaluate.main(args) == 2
     assert "carries only the checkpoint" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_the_push_fallback_wrapper_overrides_a_checkpoints_choice_only_where_no_candidate_pick_is_left():
+    from pixel_envs import ScoresPolicy
+
+    env = gym.make("ShelfSort-v0", num_objects=5, object_set="ycb", pixel_size=wh.CELL_1CM)
+    try:
+        obs, _ = env.reset(seed=3)
+        base = env.unwrapped
+        n = int(env.action_space.n)
+        scores = np.zeros(n)
+        scores[n - 1] = 1.0  # the last push-right cell: what the policy would choose
+        wrapped = wh.PushFallback(ScoresPolicy(scores, obs.shape), env)
+        everything = np.ones(n, bool)
+        assert int(wrapped.predict(obs, action_masks=everything)[0]) == n - 1
+        view = ObservationView.from_observation(obs, wrapped.rule.margin_cells)
+        masked = everything.copy()
+        masked[np.flatnonzero(view.graspable & ~view.sorted_cells)] = False  # the pick map comes first
+        assert int(wrapped.predict(obs, action_masks=masked)[0]) == wrapped.rule.push_candidates(view)[0] != n - 1
+        assert int(wrapped.predict(obs)[0]) == n - 1  # no masks: nothing to fall back from
+        assert wrapped.stats == {"push_fallbacks": 1}
+        assert base.codec.map_index("pick") == 0
+    finally:
+        env.close()
+    assert policies.policy_wrappers("m.zip+push-fallback+geometry-filter+pick-guard+loop-breaker") == (
+        "m.zip", ("+push-fallback", "+geometry-filter", "+pick-guard", "+loop-breaker"))

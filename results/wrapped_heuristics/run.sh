@@ -5,7 +5,8 @@
 # Usage: bash results/wrapped_heuristics/run.sh val   |   bash results/wrapped_heuristics/run.sh open d|a   |
 #   bash results/wrapped_heuristics/run.sh trace   (the risk of the chosen picks, validation scenes at N = 8)   |
 #   bash results/wrapped_heuristics/run.sh here d|a   (the shipped policy played again on this machine, its own label)   |
-#   bash results/wrapped_heuristics/run.sh push   (H-a with a push fallback under the wrappers: validation scenes)
+#   bash results/wrapped_heuristics/run.sh push   (H-a with a push fallback under the wrappers: validation scenes)   |
+#   bash results/wrapped_heuristics/run.sh pushps   (the shipped policy with the same push rule: validation scenes)
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -52,6 +53,14 @@ elif [[ $step == push ]]; then
   python -m shelf_env.evaluation.compare $out/val90 --pair "h-a-1cm-push$wrap" "h-a-1cm$wrap" \
       --pair "p_s_geo10_here$SHIPPED_WRAP" "h-a-1cm-push$wrap" --pair "p_s_geo10_here$SHIPPED_WRAP" "$SHIPPED_LABEL" \
       --out $out/val90_pairs_push.md
+elif [[ $step == pushps ]]; then
+  # the shipped policy with the same push rule innermost (+push-fallback) on the validation scenes, paired with the
+  # shipped policy played here (p_s_geo10_here, run.sh push)
+  python -m research.evaluate --policies "$SHIPPED_GEO+push-fallback$SHIPPED_WRAP" --ns 5,8,11 --seeds 3 --runs 30 \
+      --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/val90
+  python -m shelf_env.evaluation.compare $out/val90 --pair "p_s_geo10+push-fallback$SHIPPED_WRAP" \
+      "p_s_geo10_here$SHIPPED_WRAP" --pair "p_s_geo10+push-fallback$SHIPPED_WRAP" "h-a-1cm-push$wrap" \
+      --out $out/val90_pairs_pushps.md
 elif [[ $step == here ]]; then
   # the shipped policy's held-out cells were played on another machine (PyBullet's floating point differs between
   # CPUs): play them again here under the label p_s_geo10_here..., paired with the wrapped heuristic played here
@@ -69,6 +78,6 @@ elif [[ $step == trace ]]; then
       --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/trace_n8
   python -m research.wrapped_heuristics $out/trace_n8 $out/val90 --out $out/trace_n8.md
 else
-  echo "usage: run.sh val | open d|a|push | here d|a | push | trace" >&2
+  echo "usage: run.sh val | open d|a|push | here d|a | push | pushps | trace" >&2
   exit 2
 fi
