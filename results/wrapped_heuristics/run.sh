@@ -6,7 +6,8 @@
 #   bash results/wrapped_heuristics/run.sh trace   (the risk of the chosen picks, validation scenes at N = 8)   |
 #   bash results/wrapped_heuristics/run.sh here d|a   (the shipped policy played again on this machine, its own label)   |
 #   bash results/wrapped_heuristics/run.sh push   (H-a with a push fallback under the wrappers: validation scenes)   |
-#   bash results/wrapped_heuristics/run.sh pushps   (the shipped policy with the same push rule: validation scenes)
+#   bash results/wrapped_heuristics/run.sh pushps   (the shipped policy with the same push rule: validation scenes)   |
+#   bash results/wrapped_heuristics/run.sh pushps-open|pushps-closed|pushps-falls   (it, after validation)
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -61,6 +62,12 @@ elif [[ $step == pushps ]]; then
   python -m shelf_env.evaluation.compare $out/val90 --pair "p_s_geo10+push-fallback$SHIPPED_WRAP" \
       "p_s_geo10_here$SHIPPED_WRAP" --pair "p_s_geo10+push-fallback$SHIPPED_WRAP" "h-a-1cm-push$wrap" \
       --out $out/val90_pairs_pushps.md
+elif [[ $step == pushps-open || $step == pushps-closed || $step == pushps-falls ]]; then
+  # the shipped policy with the push rule, after validation: issue 10's open-loop grid, closed loop + safe picks, the
+  # greedy fall rate at N = 8 (results/heldout.sh's after_validation) -> $out/pushps/
+  after_validation "${step#pushps-}" $out/pushps "$SHIPPED_GEO+push-fallback$SHIPPED_WRAP" \
+      "p_s_geo10+push-fallback$SHIPPED_WRAP" "$SHIPPED_LABEL" $SHIPPED_REF research.wrapped_heuristics "$shipped" \
+      "${SHIPPED_OTHERS[@]}"
 elif [[ $step == here ]]; then
   # the shipped policy's held-out cells were played on another machine (PyBullet's floating point differs between
   # CPUs): play them again here under the label p_s_geo10_here..., paired with the wrapped heuristic played here
@@ -78,6 +85,6 @@ elif [[ $step == trace ]]; then
       --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/trace_n8
   python -m research.wrapped_heuristics $out/trace_n8 $out/val90 --out $out/trace_n8.md
 else
-  echo "usage: run.sh val | open d|a|push | here d|a | push | pushps | trace" >&2
+  echo "usage: run.sh val | open d|a|push | here d|a | push | pushps | pushps-open|closed|falls | trace" >&2
   exit 2
 fi
