@@ -30,13 +30,21 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from shelf_env.baselines.heuristics import CUP_MARGIN_M, AccessibilityHeuristic, DistanceHeuristic, ObservationView
-from shelf_env.fall_filter import FallFilter, GeometryRisk
-from shelf_env.policies import POLICIES, register_policy, register_wrapper
+from shelf_env.baselines.heuristics import (
+    CUP_MARGIN_M,
+    AccessibilityHeuristic,
+    DistanceHeuristic,
+    ObservationView,
+    PickHeuristic,
+)
+from shelf_env.fall_filter import GEOMETRY_FILTER, FallFilter, GeometryRisk, geometry_risk_path
+from shelf_env.policies import POLICIES, WRAPPERS, PolicyFactory, register_policy, register_wrapper
 from shelf_env.privileged.lookahead import LookaheadHeuristic
 
-#: The shipped P+S's geometry risk model (relative to the repository root, where evaluations run).
-SHIPPED_RISK = pathlib.Path("examples/pretrained/p_s.geometry_risk.pt")
+#: The shipped P+S's checkpoint and the geometry risk model beside it (relative to the repository root, where
+#: evaluations run): ``+shipped-filter`` is the product's ``+geometry-filter`` of that checkpoint.
+SHIPPED_CHECKPOINT = "examples/pretrained/p_s.zip"
+SHIPPED_RISK = geometry_risk_path(SHIPPED_CHECKPOINT)
 #: The wrapper's suffix.
 SHIPPED_FILTER = "+shipped-filter"
 #: The cell size (m) the shipped risk model reads: its observations are 40 x 60.
@@ -52,8 +60,7 @@ def _check(base: str) -> None:
 
 
 def _wrap(agent: Any, env: gym.Env, base: str) -> FallFilter:
-    unwrapped: Any = env.unwrapped
-    return FallFilter(agent, GeometryRisk.load(SHIPPED_RISK), unwrapped.map_names, unwrapped.rows, unwrapped.cols)
+    return WRAPPERS[GEOMETRY_FILTER].wrap(agent, env, SHIPPED_CHECKPOINT)
 
 
 class AccessibilityPushFallback(AccessibilityHeuristic):
@@ -109,21 +116,16 @@ class PushFallback:
                                    deterministic=deterministic, action_masks=action_masks)
 
 
-def _distance(env: gym.Env, seed: int) -> DistanceHeuristic:
-    return DistanceHeuristic(env)
+def _factory(heuristic: type[PickHeuristic]) -> PolicyFactory:
+    def make(env: gym.Env, seed: int) -> PickHeuristic:
+        return heuristic(env)
+    return make
 
 
-def _accessibility(env: gym.Env, seed: int) -> AccessibilityHeuristic:
-    return AccessibilityHeuristic(env)
-
-
-def _push_fallback(env: gym.Env, seed: int) -> AccessibilityPushFallback:
-    return AccessibilityPushFallback(env)
-
-
-for _name, _factory in (("h-d-1cm", _distance), ("h-a-1cm", _accessibility), ("h-a-1cm-push", _push_fallback)):
+for _name, _heuristic in (("h-d-1cm", DistanceHeuristic), ("h-a-1cm", AccessibilityHeuristic),
+                          ("h-a-1cm-push", AccessibilityPushFallback)):
     if _name not in POLICIES:  # the module may be imported twice (a worker, a test)
-        register_policy(_name, _factory, pixel_size=CELL_1CM)
+        register_policy(_name, _factory(_heuristic), pixel_size=CELL_1CM)
 register_wrapper(SHIPPED_FILTER, _wrap, check=_check, files=lambda base: [SHIPPED_RISK])
 #: The push fallback for a checkpoint's suffix (innermost: it acts on the masks the filter and the guard pass down).
 PUSH_FALLBACK = "+push-fallback"

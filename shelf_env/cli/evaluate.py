@@ -278,7 +278,8 @@ def main(argv: list[str] | None = None) -> int:
                 import ray  # noqa: F401
             except ImportError as err:
                 raise ValueError("--backend ray needs Ray: pip install '.[ray]'") from err
-            beside = [p for p in args.policies if len(ev.policy_files(p)) > (0 if ev.is_named(p) else 1)]
+            beside = [p for p in args.policies  # files other than the checkpoint itself
+                      if set(ev.policy_files(p)) - {pathlib.Path(policies.policy_file(p))}]
             if beside:  # a Ray task gets the checkpoint's bytes only, not a wrapper's model beside it
                 raise ValueError(f"--backend ray carries only the checkpoint, not the files its wrappers read; "
                                  f"run {beside} with the local backend")
