@@ -7,7 +7,8 @@
 #   bash results/wrapped_heuristics/run.sh here d|a   (the shipped policy played again on this machine, its own label)   |
 #   bash results/wrapped_heuristics/run.sh push   (H-a with a push fallback under the wrappers: validation scenes)   |
 #   bash results/wrapped_heuristics/run.sh pushps   (the shipped policy with the same push rule: validation scenes)   |
-#   bash results/wrapped_heuristics/run.sh pushps-open|pushps-closed|pushps-falls   (it, after validation)
+#   bash results/wrapped_heuristics/run.sh pushps-open|pushps-closed|pushps-falls   (it, after validation)   |
+#   bash results/wrapped_heuristics/run.sh pushps-here   (after pushps-open: its pairs with policies played here)
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -68,6 +69,15 @@ elif [[ $step == pushps-open || $step == pushps-closed || $step == pushps-falls 
   after_validation "${step#pushps-}" $out/pushps "$SHIPPED_GEO+push-fallback$SHIPPED_WRAP" \
       "p_s_geo10+push-fallback$SHIPPED_WRAP" "$SHIPPED_LABEL" $SHIPPED_REF research.wrapped_heuristics "$shipped" \
       "${SHIPPED_OTHERS[@]}"
+elif [[ $step == pushps-here ]]; then
+  # after pushps-open: the same-machine pairs. The shipped policy played on this machine (run.sh here) and H-a with the
+  # push rule (run.sh open push), their cells copied from $out/open into $out/pushps/open
+  grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out $out/pushps/open)
+  python -m research.evaluate --policies "p_s_geo10_here=$SHIPPED_GEO$SHIPPED_WRAP" "h-a-1cm-push$wrap" "${grid[@]}" \
+      --reuse-cells $out/open
+  python -m shelf_env.evaluation.compare $out/pushps/open --pair "p_s_geo10+push-fallback$SHIPPED_WRAP" \
+      "p_s_geo10_here$SHIPPED_WRAP" --pair "p_s_geo10+push-fallback$SHIPPED_WRAP" "h-a-1cm-push$wrap" \
+      --out $out/pushps/open/paired_here.md
 elif [[ $step == here ]]; then
   # the shipped policy's held-out cells were played on another machine (PyBullet's floating point differs between
   # CPUs): play them again here under the label p_s_geo10_here..., paired with the wrapped heuristic played here
@@ -85,6 +95,6 @@ elif [[ $step == trace ]]; then
       --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/trace_n8
   python -m research.wrapped_heuristics $out/trace_n8 $out/val90 --out $out/trace_n8.md
 else
-  echo "usage: run.sh val | open d|a|push | here d|a | push | pushps | pushps-open|closed|falls | trace" >&2
+  echo "usage: run.sh val | open d|a|push | here d|a | push | pushps | pushps-open|closed|falls | pushps-here | trace" >&2
   exit 2
 fi
