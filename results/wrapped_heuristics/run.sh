@@ -75,6 +75,9 @@ elif [[ $step == pushps-here ]]; then
   grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out $out/pushps/open)
   python -m research.evaluate --policies "p_s_geo10_here=$SHIPPED_GEO$SHIPPED_WRAP" "h-a-1cm-push$wrap" "${grid[@]}" \
       --reuse-cells $out/open
+  # results.csv, results.json and the figure back to pushps-open's policies (the copy above summarized its own two)
+  python -m research.evaluate --policies "$SHIPPED_GEO+push-fallback$SHIPPED_WRAP" "$shipped" "${SHIPPED_OTHERS[@]}" \
+      "${grid[@]}" --summarize-only
   python -m shelf_env.evaluation.compare $out/pushps/open --pair "p_s_geo10+push-fallback$SHIPPED_WRAP" \
       "p_s_geo10_here$SHIPPED_WRAP" --pair "p_s_geo10+push-fallback$SHIPPED_WRAP" "h-a-1cm-push$wrap" \
       --out $out/pushps/open/paired_here.md
