@@ -29,3 +29,10 @@ def env():
 def action_at(env, map_name: str, x: float, y: float) -> int:
     """Flat action index of the cell containing cabinet point (x, y) on the named map."""
     return env.codec.action_at(map_name, x, y)
+
+
+@pytest.fixture(autouse=True)
+def _sb3_logs_in_pytest_tmp(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+    """SB3 makes a log folder for every ``learn()`` without a logger, in the system's temp folder (about 135 per run of
+    the suite): keep the suite's in pytest's own temp folder, which pytest cleans."""
+    monkeypatch.setenv("SB3_LOGDIR", str(tmp_path_factory.getbasetemp() / "sb3_logs"))
