@@ -9,7 +9,7 @@
 #   bash results/wrapped_heuristics/run.sh pushps   (the shipped policy with the same push rule: validation scenes)   |
 #   bash results/wrapped_heuristics/run.sh pushps-open|pushps-closed|pushps-falls   (it, after validation)   |
 #   bash results/wrapped_heuristics/run.sh pushps-here   (after pushps-open: its pairs with policies played here)   |
-#   bash results/wrapped_heuristics/run.sh strict | strict-open | strict-here   (the push rule with the filter at 0.05)
+#   bash results/wrapped_heuristics/run.sh strict   (the push rule with the filter at 0.05: validation scenes; it stopped there)
 #   (WORKERS=2 for two processes)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -91,22 +91,6 @@ elif [[ $step == strict ]]; then
   python -m shelf_env.evaluation.compare $out/val90 --pair "p_s_geo05+push-fallback$SHIPPED_WRAP" \
       "p_s_geo10+push-fallback$SHIPPED_WRAP" --pair "p_s_geo05+push-fallback$SHIPPED_WRAP" \
       "p_s_geo10_here$SHIPPED_WRAP" --out $out/val90_pairs_strict.md
-elif [[ $step == strict-open ]]; then
-  # it after validation on issue 10's open-loop grid -> $out/strict/open (the others' cells from results/pick_guard)
-  after_validation open $out/strict "$strict" "p_s_geo05+push-fallback$SHIPPED_WRAP" "$SHIPPED_LABEL" $SHIPPED_REF \
-      research.wrapped_heuristics "$shipped" "${SHIPPED_OTHERS[@]}"
-elif [[ $step == strict-here ]]; then
-  # after strict-open: the pairs with the policies played here (the shipped policy, the push rule at 0.1, H-a with it)
-  grid=(--ns 3-14 --runs 30 --seeds 3 --object-sets ycb --out $out/strict/open)
-  python -m research.evaluate --policies "p_s_geo10_here=$SHIPPED_GEO$SHIPPED_WRAP" "h-a-1cm-push$wrap" "${grid[@]}" \
-      --reuse-cells $out/open
-  python -m research.evaluate --policies "$SHIPPED_GEO+push-fallback$SHIPPED_WRAP" "${grid[@]}" \
-      --reuse-cells $out/pushps/open
-  python -m research.evaluate --policies "$strict" "$shipped" "${SHIPPED_OTHERS[@]}" "${grid[@]}" --summarize-only
-  python -m shelf_env.evaluation.compare $out/strict/open --pair "p_s_geo05+push-fallback$SHIPPED_WRAP" \
-      "p_s_geo10_here$SHIPPED_WRAP" --pair "p_s_geo05+push-fallback$SHIPPED_WRAP" \
-      "p_s_geo10+push-fallback$SHIPPED_WRAP" --pair "p_s_geo05+push-fallback$SHIPPED_WRAP" "h-a-1cm-push$wrap" \
-      --out $out/strict/open/paired_here.md
 elif [[ $step == here ]]; then
   # the shipped policy's held-out cells were played on another machine (PyBullet's floating point differs between
   # CPUs): play them again here under the label p_s_geo10_here..., paired with the wrapped heuristic played here
@@ -124,6 +108,6 @@ elif [[ $step == trace ]]; then
       --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/trace_n8
   python -m research.wrapped_heuristics $out/trace_n8 $out/val90 --out $out/trace_n8.md
 else
-  echo "usage: run.sh val | open d|a|push | here d|a | push | pushps | pushps-open|closed|falls | pushps-here | strict | strict-open | strict-here | trace" >&2
+  echo "usage: run.sh val | open d|a|push | here d|a | push | pushps | pushps-open|closed|falls | pushps-here | strict | trace" >&2
   exit 2
 fi
