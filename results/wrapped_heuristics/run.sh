@@ -19,12 +19,19 @@ out=results/wrapped_heuristics
 shipped="$SHIPPED_GEO$SHIPPED_WRAP"  # the shipped policy and its cells' label: results/heldout.sh
 wrap=+shipped-filter+pick-guard+loop-breaker
 strict="results/stricter_filter/p_s_geo05.zip+push-fallback$SHIPPED_WRAP"  # the push rule, the filter at 0.05
+# the validation scenes (seeds 2000-2002, N = 5, 8, 11, 30 runs) and every policy the steps below play there, in order
+val=(--ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --out $out/val90)
+val_policies=("$shipped" h-d-1cm h-a-1cm "h-d-1cm$wrap" "h-a-1cm$wrap" "p_s_geo10_here=$SHIPPED_GEO$SHIPPED_WRAP"
+              "h-a-1cm-push$wrap" "$SHIPPED_GEO+push-fallback$SHIPPED_WRAP" "$strict")
+# val90's results.csv, results.json and figure over every policy played there so far (each step's own run summarized
+# its policies alone; those not played yet have no cells and are left out)
+val90_summary() { python -m research.evaluate --policies "${val_policies[@]}" "${val[@]}" --summarize-only; }
 step=${1:-val}
 if [[ $step == val ]]; then
   # validation: seeds 2000-2002, N = 5, 8, 11, 30 runs; the shipped policy's cells from results/push_guard/val90
-  python -m research.evaluate --policies "$shipped" h-d-1cm h-a-1cm "h-d-1cm$wrap" "h-a-1cm$wrap" --ns 5,8,11 \
-      --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/val90 \
+  python -m research.evaluate --policies "${val_policies[@]:0:5}" "${val[@]}" --workers "${WORKERS:-1}" \
       --reuse-cells results/push_guard/val90
+  val90_summary
   python -m shelf_env.evaluation.compare $out/val90 --pair "$SHIPPED_LABEL" "h-d-1cm$wrap" \
       --pair "$SHIPPED_LABEL" "h-a-1cm$wrap" --pair "h-d-1cm$wrap" h-d-1cm --pair "h-a-1cm$wrap" h-a-1cm \
       --out $out/val90_pairs.md
@@ -52,16 +59,17 @@ elif [[ $step == open ]]; then
 elif [[ $step == push ]]; then
   # H-a with a camera-only push fallback under the wrappers (research.wrapped_heuristics.AccessibilityPushFallback) on
   # the validation scenes, beside the shipped policy played on this machine (p_s_geo10_here)
-  python -m research.evaluate --policies "p_s_geo10_here=$SHIPPED_GEO$SHIPPED_WRAP" "h-a-1cm-push$wrap" --ns 5,8,11 \
-      --seeds 3 --runs 30 --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/val90
+  python -m research.evaluate --policies "p_s_geo10_here=$SHIPPED_GEO$SHIPPED_WRAP" "h-a-1cm-push$wrap" "${val[@]}" \
+      --workers "${WORKERS:-1}"
+  val90_summary
   python -m shelf_env.evaluation.compare $out/val90 --pair "h-a-1cm-push$wrap" "h-a-1cm$wrap" \
       --pair "p_s_geo10_here$SHIPPED_WRAP" "h-a-1cm-push$wrap" --pair "p_s_geo10_here$SHIPPED_WRAP" "$SHIPPED_LABEL" \
       --out $out/val90_pairs_push.md
 elif [[ $step == pushps ]]; then
   # the shipped policy with the same push rule innermost (+push-fallback) on the validation scenes, paired with the
   # shipped policy played here (p_s_geo10_here, run.sh push)
-  python -m research.evaluate --policies "$SHIPPED_GEO+push-fallback$SHIPPED_WRAP" --ns 5,8,11 --seeds 3 --runs 30 \
-      --first-seed 2000 --object-sets ycb --workers "${WORKERS:-1}" --out $out/val90
+  python -m research.evaluate --policies "$SHIPPED_GEO+push-fallback$SHIPPED_WRAP" "${val[@]}" --workers "${WORKERS:-1}"
+  val90_summary
   python -m shelf_env.evaluation.compare $out/val90 --pair "p_s_geo10+push-fallback$SHIPPED_WRAP" \
       "p_s_geo10_here$SHIPPED_WRAP" --pair "p_s_geo10+push-fallback$SHIPPED_WRAP" "h-a-1cm-push$wrap" \
       --out $out/val90_pairs_pushps.md
@@ -86,8 +94,8 @@ elif [[ $step == pushps-here ]]; then
 elif [[ $step == strict ]]; then
   # the push rule with the stricter filter (the shipped fall model at 0.05: results/stricter_filter) on the validation
   # scenes, paired with the push rule at 0.1 and the shipped policy, both played here
-  python -m research.evaluate --policies "$strict" --ns 5,8,11 --seeds 3 --runs 30 --first-seed 2000 \
-      --object-sets ycb --workers "${WORKERS:-1}" --out $out/val90
+  python -m research.evaluate --policies "$strict" "${val[@]}" --workers "${WORKERS:-1}"
+  val90_summary
   python -m shelf_env.evaluation.compare $out/val90 --pair "p_s_geo05+push-fallback$SHIPPED_WRAP" \
       "p_s_geo10+push-fallback$SHIPPED_WRAP" --pair "p_s_geo05+push-fallback$SHIPPED_WRAP" \
       "p_s_geo10_here$SHIPPED_WRAP" --out $out/val90_pairs_strict.md
