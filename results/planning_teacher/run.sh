@@ -11,6 +11,8 @@
 #       the first 10 scenes of seed 0 at each N (default: 5 8 3 4 6 7), beside the policies that played them under
 #       the same conditions (results/privileged_ceiling: H-d, H-a, their loop-breaker variants, the one-step
 #       lookahead + LB, the shipped P+S + LB) -> results/planning_teacher/closed_safe/ (report.md)
+#   bash results/planning_teacher/run.sh closed_safe large [N ...]   # the same, the first 3 scenes at each N
+#       (default: 12 13 14, as the open loop there)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1
@@ -26,10 +28,16 @@ each_n() {  # NS OPTIONS...: one planner call per N of NS (a stopped run keeps e
 if [ "${1:-}" = closed_safe ]; then
   shift
   out=$out/closed_safe
-  grid=(--runs 10 --closed-loop '{}' --safe-picks --out $out)
-  each_n "${*:-5 8 3 4 6 7}" "${grid[@]}"
-  ns=$(ls $out/cells | sed -n "s/.*__N0*\([0-9][0-9]*\)__.*/\1/p" | sort -n | paste -sd, -)
-  planner --ns "$ns" "${grid[@]}" --summarize-only
+  cond=(--closed-loop '{}' --safe-picks --out $out)
+  if [ "${1:-}" = large ]; then  # the first 3 scenes per N, as the open loop at N = 12..14
+    shift
+    each_n "${*:-12 13 14}" --runs 3 "${cond[@]}"
+  else
+    each_n "${*:-5 8 3 4 6 7}" --runs 10 "${cond[@]}"
+  fi
+  # results.json / results.csv / the plot: the 10-scene cells (the 3-scene ones are in report.md)
+  ns=$(ls $out/cells | sed -n "s/.*__N0*\([0-9][0-9]*\)__.*__runs10\.json/\1/p" | sort -n | paste -sd, -)
+  planner --ns "$ns" --runs 10 "${cond[@]}" --summarize-only
   .venv/bin/python research/planner_probe.py $out --against results/privileged_ceiling --out $out/report.md \
     --policies h-d h-a h-d+loop-breaker h-a+loop-breaker h-d-lookahead+loop-breaker p_s+loop-breaker
   exit 0
