@@ -539,13 +539,43 @@ def select_shards(shards: Sequence[Shard], spec: int | str | None, option: str =
     return sorted(out, key=lambda s: s.path.name)
 
 
-def status(folder: pathlib.Path, since: str | None = None) -> str:
-    """What the dataset holds: states, labels and scenes per N and per series, label outcomes, the collection's
-    throughput (per series from each shard's own clock), and the ``--max-shards`` spec that names today's dataset
-    for a run that must stay reproducible while the dataset grows (`select_shards`). ``since``: an earlier such
-    spec; the tables then count only the shards collected after it (a session's collection and its rates), while
-    the spec line still names all of it."""
-    every = load_dataset(folder)
+@dataclass
+class DatasetSummary:
+    """What `summarize` counts: per N ``[scenes, states, labels, invalid labels]``, per series ``[shards, states,
+    labels, seconds]`` (each shard's own clock), and the ``--max-shards`` spec and the series with a missing shard,
+    both read from the whole dataset even where ``since`` leaves shards out."""
+
+    folder: pathlib.Path
+    since: str | None
+    shards: int
+    per_n: dict[int, list[int]]
+    per_series: dict[str, list[float]]
+    spec: str
+    gaps: list[str]
+    collected: str | None  # the newest shard's collection date (YYYY-MM-DD); None where no shard records one
+
+    @property
+    def states(self) -> int:
+        return int(sum(r[1] for r in self.per_series.values()))
+
+    @property
+    def labels(self) -> int:
+        return int(sum(r[2] for r in self.per_series.values()))
+
+    @property
+    def seconds(self) -> float:
+        return float(sum(r[3] for r in self.per_series.values()))
+
+
+def summarize(folder: pathlib.Path, since: str | None = None, names: set[str] | None = None) -> DatasetSummary:
+    """Count what the dataset in ``folder`` holds (see `status`); ``since``: count only the shards after that spec;
+    ``names``: only these shard files count as the dataset (e.g. the ones git tracks while a collector adds more)."""
+    if names is None:
+        every = load_dataset(folder)
+    else:
+        every = [load_shard(f) for f in shard_files(folder) if f.name in names]
+        if not every:
+            raise ValueError(f"none of the {len(names)} named shards is in {folder}")
     before = {s.path.name for s in select_shards(every, since, "--since")} if since is not None else set()
     shards = [s for s in every if s.path.name not in before]
     per_n: dict[int, list[int]] = {}
@@ -565,34 +595,51 @@ def status(folder: pathlib.Path, since: str | None = None) -> str:
             row[1] += int((n_of_state == n).sum())
             row[2] += int((n_of_label == n).sum())
             row[3] += int((~s.arrays["label_valid"][n_of_label == n]).sum())
-    states, labels, seconds = (sum(r[k] for r in per_series.values()) for k in (1, 2, 3))
-
-    def per_hour(count: float, secs: float) -> str:
-        return f"{count / max(secs, 1e-9) * 3600:.0f}"
-
-    lines = [f"dataset {folder}{f' since {since}' if since is not None else ''}: {len(shards)} shards, "
-             f"{sum(r[0] for r in per_n.values())} scenes, {states} states, "
-             f"{labels} labels ({labels / max(states, 1):.1f} per state), "
-             f"{sum(r[3] for r in per_n.values()) / max(labels, 1):.1%} of labels invalid",
-             f"collection: {seconds / 3600:.2f} h of worker time, {per_hour(states, seconds)} states "
-             f"and {per_hour(labels, seconds)} labels per worker-hour",
-             "| N | scenes | states | labels | invalid labels |", "|---|---|---|---|---|"]
-    lines += [f"| {n} | {r[0]} | {r[1]} | {r[2]} | {r[3] / max(r[2], 1):.1%} |" for n, r in sorted(per_n.items())]
-    lines += ["", "| series | shards | states | labels | worker-hours | states / labels per worker-hour |",
-              "|---|---|---|---|---|---|"]
-    lines += [f"| {name} | {r[0]:.0f} | {r[1]:.0f} | {r[2]:.0f} | {r[3] / 3600:.2f} | "
-              f"{per_hour(r[1], r[3])} / {per_hour(r[2], r[3])} |" for name, r in sorted(per_series.items())]
     count: dict[str, int] = {}  # the spec and the gap check read the whole dataset, with or without since
     last: dict[str, int] = {}
     for s in every:
         name, _, index = s.path.stem.partition("_")
         count[name] = count.get(name, 0) + 1
         last[name] = max(last.get(name, 0), int(index) + 1)  # shards 0..k-1 unless one is missing
-    lines.append("all of it, named for a reproducible run: --max-shards "
-                 + ",".join(f"{name}:{k}" for name, k in sorted(count.items())))
-    gaps = [name for name, k in sorted(count.items()) if last[name] != k]
-    if gaps:  # a collection fills a missing shard first, so the first k of such a series can change
-        lines.append(f"series with a missing shard (the spec names them only until it is collected): {', '.join(gaps)}")
+    dates = [str(s.meta["collected"]) for s in every if "collected" in s.meta]
+    return DatasetSummary(folder=folder, since=since, shards=len(shards), per_n=per_n, per_series=per_series,
+                          spec=",".join(f"{name}:{k}" for name, k in sorted(count.items())),
+                          gaps=[name for name, k in sorted(count.items()) if last[name] != k],
+                          collected=max(dates) if dates else None)
+
+
+def status(folder: pathlib.Path, since: str | None = None) -> str:
+    """What the dataset holds: states, labels and scenes per N and per series, label outcomes, the collection's
+    throughput (per series from each shard's own clock), and the ``--max-shards`` spec that names today's dataset
+    for a run that must stay reproducible while the dataset grows (`select_shards`). ``since``: an earlier such
+    spec; the tables then count only the shards collected after it (a session's collection and its rates), while
+    the spec line still names all of it."""
+    return format_status(summarize(folder, since))
+
+
+def format_status(d: DatasetSummary) -> str:
+    """`status`'s text for a `summarize` result."""
+    states, labels, seconds = d.states, d.labels, d.seconds
+
+    def per_hour(count: float, secs: float) -> str:
+        return f"{count / max(secs, 1e-9) * 3600:.0f}"
+
+    lines = [f"dataset {d.folder}{f' since {d.since}' if d.since is not None else ''}: {d.shards} shards, "
+             f"{sum(r[0] for r in d.per_n.values())} scenes, {states} states, "
+             f"{labels} labels ({labels / max(states, 1):.1f} per state), "
+             f"{sum(r[3] for r in d.per_n.values()) / max(labels, 1):.1%} of labels invalid",
+             f"collection: {seconds / 3600:.2f} h of worker time, {per_hour(states, seconds)} states "
+             f"and {per_hour(labels, seconds)} labels per worker-hour",
+             "| N | scenes | states | labels | invalid labels |", "|---|---|---|---|---|"]
+    lines += [f"| {n} | {r[0]} | {r[1]} | {r[2]} | {r[3] / max(r[2], 1):.1%} |" for n, r in sorted(d.per_n.items())]
+    lines += ["", "| series | shards | states | labels | worker-hours | states / labels per worker-hour |",
+              "|---|---|---|---|---|---|"]
+    lines += [f"| {name} | {r[0]:.0f} | {r[1]:.0f} | {r[2]:.0f} | {r[3] / 3600:.2f} | "
+              f"{per_hour(r[1], r[3])} / {per_hour(r[2], r[3])} |" for name, r in sorted(d.per_series.items())]
+    lines.append(f"all of it, named for a reproducible run: --max-shards {d.spec}")
+    if d.gaps:  # a collection fills a missing shard first, so the first k of such a series can change
+        lines.append("series with a missing shard (the spec names them only until it is collected): "
+                     + ", ".join(d.gaps))
     return "\n".join(lines)
 
 
