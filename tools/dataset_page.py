@@ -26,6 +26,7 @@ collector adds shards still describes what a clean clone holds.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import pathlib
 import re
@@ -36,7 +37,7 @@ import textwrap
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from shelf_env.privileged.dataset import DatasetSummary, shard_files, summarize  # noqa: E402
+from shelf_env.privileged.dataset import DatasetSummary, format_status, shard_files, summarize  # noqa: E402
 
 AIM = 100_000  # the issue's aim, in labelled states
 WIDTH = 118  # the page's line length
@@ -44,7 +45,7 @@ STATUS = ("<!-- dataset status: begin -->", "<!-- dataset status: end -->")
 PROJECTION = ("<!-- dataset projection: begin -->", "<!-- dataset projection: end -->")
 TABLE_HEADER = ("| session | series | shards | states | labels | worker-hours | states / labels per worker-hour "
                 "| the cores |")
-ROW = re.compile(r"^\| (\d+)(?:st|nd|rd|th) \| (s\d\d) \| ([\d,]+) \| ([\d,]+) \| [\d,]* \| ~?([\d.]+) \|", re.M)
+ROW = re.compile(r"^\| (\d+)(?:st|nd|rd|th) \| s\d\d \| [\d,]+ \| ([\d,]+) \| [\d,]* \| ~?([\d.]+) \|", re.M)
 VERDICT = re.compile(r"The dataset holds [\d,]+ states \([\d.]+ % of")
 CHANGELOG = re.compile(r"The teacher dataset holds [\d,]+ states, [\d,]+ labels in [\d,]+ shards \([\d.]+ % of")
 WORDS = {1: "first", 2: "second", 3: "third", 4: "fourth", 5: "fifth", 6: "sixth", 7: "seventh", 8: "eighth",
@@ -95,12 +96,11 @@ def sub_once(pattern: re.Pattern[str], text: str, new: str, where: str) -> str:
     return out
 
 
-def session_rows(text: str) -> dict[int, list[tuple[str, int, float]]]:
-    """The throughput table's rows per session: (series, states, worker-hours); rows spanning sessions are skipped."""
-    rows: dict[int, list[tuple[str, int, float]]] = {}
+def session_rows(text: str) -> dict[int, list[tuple[int, float]]]:
+    """The throughput table's rows per session: (states, worker-hours); rows spanning sessions are skipped."""
+    rows: dict[int, list[tuple[int, float]]] = {}
     for m in ROW.finditer(text):
-        rows.setdefault(int(m.group(1)), []).append((m.group(2), int(m.group(4).replace(",", "")),
-                                                      float(m.group(5))))
+        rows.setdefault(int(m.group(1)), []).append((int(m.group(2).replace(",", "")), float(m.group(3))))
     return rows
 
 
@@ -140,10 +140,10 @@ def projection(summary: DatasetSummary, text: str) -> str:
     if not rows:
         raise ValueError("the throughput table has no per-session rows to take a rate from")
     last = max(rows)
-    rate = sum(r[1] for r in rows[last]) / sum(r[2] for r in rows[last])
+    rate = sum(r[0] for r in rows[last]) / sum(r[1] for r in rows[last])
     share = summary.states / AIM
     left = max(AIM - summary.states, 0)
-    recent = [sum(r[1] for r in rows[k]) for k in rows if k >= 26]
+    recent = [sum(r[0] for r in rows[k]) for k in rows if k >= 26]
     spread = (f" (the rows above: from {min(recent):,} to {max(recent):,} states a session since the twenty-sixth,"
               " most of them beside other work)") if recent else ""
     if left == 0:
@@ -174,13 +174,6 @@ def rewrite(page: str, changelog: str, summary: DatasetSummary, status_text: str
     return page, changelog
 
 
-def status_text(summary: DatasetSummary, shown_folder: str) -> str:
-    """`shelf_env.privileged.dataset.status`'s text for ``summary``, the folder named as the command names it."""
-    from shelf_env.privileged import dataset
-
-    return dataset.format_status(summary).replace(f"dataset {summary.folder}", f"dataset {shown_folder}", 1)
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=pathlib.Path, default=ROOT / "data" / "teacher", help="the dataset folder")
@@ -203,11 +196,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.session is not None:
             new_page = add_session(page, args.session, summarize(args.data, args.since, names=names), args.note,
                                    str(args.page))
-        files = [args.data / name for name in sorted(names)] if names is not None else shard_files(args.data)
+        files = [p for p in shard_files(args.data) if names is None or p.name in names]  # what summarize read
         megabytes = sum(p.stat().st_size for p in files) / 1e6
         shown = "data/teacher" if args.data.resolve() == (ROOT / "data" / "teacher").resolve() else str(args.data)
-        new_page, new_changelog = rewrite(new_page, changelog, summary, status_text(summary, shown), megabytes,
-                                          str(args.page), str(args.changelog))
+        text = format_status(dataclasses.replace(summary, folder=pathlib.Path(shown)))  # named as the command names it
+        new_page, new_changelog = rewrite(new_page, changelog, summary, text, megabytes, str(args.page),
+                                          str(args.changelog))
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
