@@ -40,7 +40,7 @@ def summary(since: str | None = None) -> DatasetSummary:
     return DatasetSummary(folder=pathlib.Path("data/teacher"), since=since, shards=30,
                           per_n={5: [60, 50_000, 900_000, 9]},
                           per_series={"s03": [20, 30_000, 500_000, 36_000.0], "s05": [10, 20_000, 400_000, 7_200.0]},
-                          spec="s03:20,s05:10", gaps=[], collected="2026-12-07")
+                          spec="s03:20,s05:10", gaps=[], collected="2026-12-07", size_bytes=31_600_000)
 
 
 def test_the_committed_page_matches_the_committed_shards() -> None:

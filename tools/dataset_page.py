@@ -37,7 +37,7 @@ import textwrap
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from shelf_env.privileged.dataset import DatasetSummary, format_status, shard_files, summarize  # noqa: E402
+from shelf_env.privileged.dataset import DatasetSummary, format_status, summarize  # noqa: E402
 
 AIM = 100_000  # the aim, in labelled states
 WIDTH = 118  # the page's line length
@@ -196,11 +196,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.session is not None:
             new_page = add_session(page, args.session, summarize(args.data, args.since, names=names), args.note,
                                    str(args.page))
-        files = [p for p in shard_files(args.data) if names is None or p.name in names]  # what summarize read
-        megabytes = sum(p.stat().st_size for p in files) / 1e6
         shown = "data/teacher" if args.data.resolve() == (ROOT / "data" / "teacher").resolve() else str(args.data)
         text = format_status(dataclasses.replace(summary, folder=pathlib.Path(shown)))  # named as the command names it
-        new_page, new_changelog = rewrite(new_page, changelog, summary, text, megabytes, str(args.page),
+        new_page, new_changelog = rewrite(new_page, changelog, summary, text, summary.size_bytes / 1e6, str(args.page),
                                           str(args.changelog))
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -542,8 +542,9 @@ def select_shards(shards: Sequence[Shard], spec: int | str | None, option: str =
 @dataclass
 class DatasetSummary:
     """What `summarize` counts: per N ``[scenes, states, labels, invalid labels]``, per series ``[shards, states,
-    labels, seconds]`` (each shard's own clock), and the ``--max-shards`` spec and the series with a missing shard,
-    both read from the whole dataset even where ``since`` leaves shards out."""
+    labels, seconds]`` (each shard's own clock), and the ``--max-shards`` spec, the series with a missing shard, the
+    newest shard's date and the shards' size on disk, all read from the whole dataset even where ``since`` leaves
+    shards out."""
 
     folder: pathlib.Path
     since: str | None
@@ -553,6 +554,7 @@ class DatasetSummary:
     spec: str
     gaps: list[str]
     collected: str | None  # the newest shard's collection date (YYYY-MM-DD); None where no shard records one
+    size_bytes: int  # the counted shard files' size on disk
 
     @property
     def states(self) -> int:
@@ -605,7 +607,8 @@ def summarize(folder: pathlib.Path, since: str | None = None, names: set[str] | 
     return DatasetSummary(folder=folder, since=since, shards=len(shards), per_n=per_n, per_series=per_series,
                           spec=",".join(f"{name}:{k}" for name, k in sorted(count.items())),
                           gaps=[name for name, k in sorted(count.items()) if last[name] != k],
-                          collected=max(dates) if dates else None)
+                          collected=max(dates) if dates else None,
+                          size_bytes=sum(s.path.stat().st_size for s in every))
 
 
 def status(folder: pathlib.Path, since: str | None = None) -> str:
