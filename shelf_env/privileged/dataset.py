@@ -554,7 +554,7 @@ class DatasetSummary:
     spec: str
     gaps: list[str]
     collected: str | None  # the newest shard's collection date (YYYY-MM-DD); None where no shard records one
-    size_bytes: int  # the counted shard files' size on disk
+    size_bytes: int  # the read shard files' size on disk: the whole dataset, whatever since leaves out
 
     @property
     def states(self) -> int:
